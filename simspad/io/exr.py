@@ -1,0 +1,120 @@
+"""OpenEXR keyframes of a render directory (DESIGN §5): linear radiance R,G,B (or Y) plus optional depth Z.
+
+Files are written atomically (temporary name, then rename) so an interrupted render never leaves a truncated
+frame. Reading accepts what other renderers write: half or float pixels, ``Y`` or ``R,G,B`` channels, and a
+depth channel named ``Z`` (or ``depth.Z`` / ``depth.Y`` / ``depth.T`` as written by Mitsuba's AOV film).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+
+from simspad.errors import InputError
+from simspad.io.atomic import atomic_path
+
+RGB_CHANNELS = ("R", "G", "B")
+LUMINANCE_CHANNEL = "Y"
+DEPTH_CHANNELS = ("Z", "depth.Z", "depth.Y", "depth.T", "depth")
+
+
+@dataclass(frozen=True)
+class ExrInfo:
+    """What an EXR header says, without reading pixels.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    channels : tuple of str
+        Channel names as stored.
+    radiance : str
+        ``"rgb"`` or ``"y"``: which radiance channels the file carries.
+    depth_channel : str or None
+        Name of the depth channel, if any.
+    """
+
+    width: int
+    height: int
+    channels: tuple[str, ...]
+    radiance: str
+    depth_channel: str | None
+
+
+def write_exr(path: str | Path, channels: dict[str, np.ndarray]) -> Path:
+    """Write float32 channels ``{name: [H, W]}`` to ``path`` atomically (ZIP compression, lossless).
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination ``.exr`` file.
+    channels : dict of str to ndarray
+        Each a 2-D array of the same shape; stored as 32-bit float.
+    """
+    path = Path(path)
+    data = {name: np.ascontiguousarray(a, dtype=np.float32) for name, a in channels.items()}
+    shapes = {a.shape for a in data.values()}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 2:
+        raise ValueError(f"all channels must be 2-D arrays of one shape, got {sorted(shapes)}")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as tmp, OpenEXR.File(header, data) as f:
+        f.write(str(tmp))
+    return path
+
+
+def _classify(path: Path, names: tuple[str, ...]) -> tuple[str, str | None]:
+    if all(c in names for c in RGB_CHANNELS):
+        radiance = "rgb"
+    elif LUMINANCE_CHANNEL in names:
+        radiance = "y"
+    else:
+        raise InputError(f"no radiance channels: expected R,G,B or Y, found {', '.join(names) or 'none'}",
+                         path=path, field="channels")
+    depth = next((c for c in DEPTH_CHANNELS if c in names), None)
+    return radiance, depth
+
+
+def read_exr_info(path: str | Path) -> ExrInfo:
+    """Read an EXR header only. Raises :class:`InputError` if the file is missing or not an EXR."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("keyframe file is missing", path=path, field="file")
+    try:
+        f = OpenEXR.File(str(path), separate_channels=True, header_only=True)
+        header = f.header()
+    except Exception as exc:  # OpenEXR raises plain RuntimeError for corrupt or foreign files
+        raise InputError(f"not a readable OpenEXR file ({exc})", path=path, field="file") from None
+    (x0, y0), (x1, y1) = (np.asarray(v) for v in header["dataWindow"])
+    names = tuple(sorted(ch.name for ch in header["channels"]))
+    radiance, depth = _classify(path, names)
+    return ExrInfo(width=int(x1 - x0 + 1), height=int(y1 - y0 + 1), channels=names, radiance=radiance,
+                   depth_channel=depth)
+
+
+def read_exr(path: str | Path) -> dict[str, np.ndarray]:
+    """Read an EXR keyframe as float32 arrays.
+
+    Returns
+    -------
+    dict
+        ``"rgb"``: [H, W, 3] linear radiance (present if the file has R,G,B), ``"y"``: [H, W] (present if it
+        has only Y), ``"z"``: [H, W] depth in scene units (m) if the file has a depth channel.
+    """
+    path = Path(path)
+    try:
+        f = OpenEXR.File(str(path), separate_channels=True)
+        channels = {name: ch.pixels for name, ch in f.channels().items()}
+    except Exception as exc:
+        raise InputError(f"not a readable OpenEXR file ({exc})", path=path, field="file") from None
+    radiance, depth = _classify(path, tuple(channels))
+    out: dict[str, np.ndarray] = {}
+    if radiance == "rgb":
+        out["rgb"] = np.stack([channels[c].astype(np.float32, copy=False) for c in RGB_CHANNELS], axis=-1)
+    else:
+        out["y"] = channels[LUMINANCE_CHANNEL].astype(np.float32, copy=False)
+    if depth is not None:
+        out["z"] = channels[depth].astype(np.float32, copy=False)
+    return out

@@ -1,0 +1,293 @@
+"""The scene library: built-in scenes in ``scenes/`` and users' own Mitsuba 3 scenes.
+
+A scene is a folder. Built-in scenes hold ``scene.toml`` (camera id, default trajectory, description, ids of
+animated objects) and either ``scene.py`` exposing ``build() -> dict`` (for ``mi.load_dict``) or ``scene.xml``.
+A user's scene is any folder holding one Mitsuba 3 ``.xml`` with a perspective sensor (or the path of that
+``.xml``); an optional ``scene.toml`` beside it supplies the same fields as for built-in scenes.
+
+Relative ``default_trajectory`` paths resolve against the repository root for built-in scenes (they point into
+``trajectories/``) and against the scene folder for users' scenes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import tomllib
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from simspad.errors import SimSpadError
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SCENES_DIR = REPO_ROOT / "scenes"
+_ASSETS_DIR = Path(__file__).resolve().parent / "scene_assets"
+#: Camera id assumed for a user's XML whose first perspective sensor has no id; the renderer then takes the
+#: scene's first sensor.
+DEFAULT_CAMERA_ID = "camera"
+_PERSPECTIVE_TYPES = ("perspective", "thinlens")
+
+
+@dataclass(frozen=True)
+class SceneInfo:
+    """Where a scene lives and how to animate it.
+
+    Attributes
+    ----------
+    name : str
+        Built-in name, or the user's folder (or file stem) name.
+    folder : Path
+        The scene folder (hashed by :func:`content_hash`).
+    camera_id : str
+        Id of the perspective sensor the renderer poses.
+    default_trajectory : Path or None
+        Trajectory used when none is given.
+    description : str
+        One line for ``simspad scenes``.
+    objects : tuple of str
+        Ids of shapes that trajectory objects animate.
+    source : Path or None
+        The ``scene.py`` builder or the ``.xml`` file the renderer loads.
+    builtin : bool
+        True for scenes shipped in ``scenes/``.
+    """
+
+    name: str
+    folder: Path
+    camera_id: str
+    default_trajectory: Path | None
+    description: str
+    objects: tuple[str, ...] = ()
+    source: Path | None = field(default=None, compare=False)
+    builtin: bool = False
+
+
+def builtin_scene_names() -> list[str]:
+    """Names of the built-in scenes (folders of ``scenes/`` holding a ``scene.toml``), sorted."""
+    if not SCENES_DIR.is_dir():
+        return []
+    return sorted(p.name for p in SCENES_DIR.iterdir() if (p / "scene.toml").is_file())
+
+
+def list_scenes() -> list[SceneInfo]:
+    """All built-in scenes, sorted by name."""
+    return [_builtin_info(name) for name in builtin_scene_names()]
+
+
+def resolve_scene(name_or_path) -> SceneInfo:
+    """Find a scene by built-in name, by a user's scene folder, or by the path of a Mitsuba ``.xml`` file.
+
+    Raises
+    ------
+    SimSpadError
+        Unknown name or missing path (naming it and listing the built-in scenes), or a folder/XML that is
+        not a usable Mitsuba scene.
+    """
+    if isinstance(name_or_path, SceneInfo):
+        return name_or_path
+    text = str(name_or_path)
+    if text in builtin_scene_names() and not Path(text).exists():
+        return _builtin_info(text)
+    path = Path(text).expanduser()
+    if path.is_dir():
+        if (path / "scene.py").is_file() and (path / "scene.toml").is_file():
+            return _folder_info(path, builtin=path.resolve().parent == SCENES_DIR.resolve())
+        return _user_info(_find_xml(path), name=path.resolve().name)
+    if path.is_file():
+        if path.suffix.lower() != ".xml":
+            raise SimSpadError("expected a built-in scene name, a scene folder or a Mitsuba .xml file",
+                               path=path, field="scene")
+        stem = path.stem if path.stem != "scene" else path.resolve().parent.name
+        return _user_info(path, name=stem)
+    names = ", ".join(builtin_scene_names()) or "(none)"
+    raise SimSpadError(f"unknown scene {text!r}: not a built-in scene ({names}) nor an existing folder or .xml file",
+                       field="scene")
+
+
+def scene_dict_or_file(info: SceneInfo) -> dict | Path:
+    """What the renderer loads: ``build()``'s dict (for ``mi.load_dict``) or the XML path (for ``mi.load_file``).
+
+    A Mitsuba variant must be set before calling this for a ``scene.py`` scene (``build()`` creates Mitsuba
+    objects such as ``mi.Bitmap``). The returned dict is fresh on each call; procedural assets are cached in
+    memory by :mod:`simspad.scene_assets`.
+    """
+    info = resolve_scene(info)
+    if info.source is None:
+        raise SimSpadError("scene has neither scene.py nor an .xml file", path=info.folder, field="scene")
+    if info.source.suffix == ".py":
+        module = _load_builder(info.source)
+        build = getattr(module, "build", None)
+        if not callable(build):
+            raise SimSpadError("scene.py must define build() -> dict", path=info.source, field="build")
+        scene = build()
+        if not isinstance(scene, dict) or scene.get("type") != "scene":
+            raise SimSpadError("build() must return a Mitsuba scene dict with type 'scene'",
+                               path=info.source, field="build")
+        return scene
+    return info.source
+
+
+def content_hash(info: SceneInfo) -> str:
+    """SHA-256 (hex) over the scene folder's files in sorted order: relative path and bytes of each.
+
+    Built-in scenes also hash the procedural asset generators (``simspad/scene_assets``), since their textures
+    and meshes are made at load time. ``__pycache__`` and hidden files are skipped.
+    """
+    info = resolve_scene(info)
+    digest = hashlib.sha256()
+    roots = [("scene", info.folder)]
+    if info.builtin and _ASSETS_DIR.is_dir():
+        roots.append(("assets", _ASSETS_DIR))
+    for label, root in roots:
+        for path in sorted(_hashable_files(root)):
+            rel = path.relative_to(root).as_posix()
+            digest.update(f"{label}/{rel}\0".encode())
+            with open(path, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    digest.update(block)
+            digest.update(b"\0")
+    return digest.hexdigest()
+
+
+def scenes_from_cli(contact_sheet: Path | None = None) -> None:
+    """``simspad scenes``: print the built-in scenes; optionally render all of them into one contact sheet."""
+    import click
+
+    scenes = list_scenes()
+    width = max((len(s.name) for s in scenes), default=4)
+    for s in scenes:
+        traj = _display_path(s.default_trajectory) if s.default_trajectory else "-"
+        objs = f"  [animated: {', '.join(s.objects)}]" if s.objects else ""
+        click.echo(f"{s.name:<{width}}  {traj:<28}  {s.description}{objs}")
+    if contact_sheet is not None:
+        from simspad.scene_assets.contact_sheet import write_contact_sheet
+
+        path = write_contact_sheet(Path(contact_sheet), scenes)
+        click.echo(f"wrote {path}")
+
+
+# --------------------------------------------------------------------------------------------- internals
+
+
+def _display_path(path: Path) -> str:
+    try:
+        return path.resolve().relative_to(REPO_ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _hashable_files(root: Path):
+    for path in root.rglob("*"):
+        rel = path.relative_to(root).parts
+        if any(part.startswith(".") or part == "__pycache__" for part in rel):
+            continue
+        if path.is_file():
+            yield path
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise SimSpadError(f"malformed TOML: {exc}", path=path) from None
+
+
+def _meta_fields(meta: dict, toml_path: Path, base: Path) -> dict:
+    """Validate the fields of a ``scene.toml``; relative trajectory paths resolve against ``base``."""
+    out = {}
+    for key in ("camera_id", "description", "default_trajectory"):
+        if key in meta and not isinstance(meta[key], str):
+            raise SimSpadError(f"expected a string, got {type(meta[key]).__name__}", path=toml_path, field=key)
+    if "camera_id" in meta:
+        out["camera_id"] = meta["camera_id"]
+    if "description" in meta:
+        out["description"] = meta["description"]
+    if meta.get("default_trajectory"):
+        traj = Path(meta["default_trajectory"])
+        traj = traj if traj.is_absolute() else base / traj
+        if not traj.is_file():
+            raise SimSpadError(f"default trajectory {str(traj)!r} does not exist", path=toml_path,
+                               field="default_trajectory")
+        out["default_trajectory"] = traj
+    if "objects" in meta:
+        objs = meta["objects"]
+        if not isinstance(objs, list) or not all(isinstance(o, str) for o in objs):
+            raise SimSpadError("expected a list of shape ids (strings)", path=toml_path, field="objects")
+        out["objects"] = tuple(objs)
+    return out
+
+
+def _builtin_info(name: str) -> SceneInfo:
+    return _folder_info(SCENES_DIR / name, builtin=True)
+
+
+def _folder_info(folder: Path, *, builtin: bool) -> SceneInfo:
+    toml_path = folder / "scene.toml"
+    meta = _meta_fields(_read_toml(toml_path), toml_path, REPO_ROOT if builtin else folder)
+    if (folder / "scene.py").is_file():
+        source = folder / "scene.py"
+    else:
+        source = _find_xml(folder)
+    return SceneInfo(name=folder.name, folder=folder.resolve(), camera_id=meta.get("camera_id", DEFAULT_CAMERA_ID),
+                     default_trajectory=meta.get("default_trajectory"), description=meta.get("description", ""),
+                     objects=meta.get("objects", ()), source=source.resolve(), builtin=builtin)
+
+
+def _find_xml(folder: Path) -> Path:
+    """The folder's scene file: ``scene.xml`` if present, else its only top-level ``.xml``."""
+    if (folder / "scene.xml").is_file():
+        return folder / "scene.xml"
+    xmls = sorted(p for p in folder.glob("*.xml") if p.is_file())
+    if not xmls:
+        raise SimSpadError("scene folder holds no Mitsuba .xml file (nor scene.py + scene.toml)",
+                           path=folder, field="scene")
+    if len(xmls) > 1:
+        names = ", ".join(p.name for p in xmls)
+        raise SimSpadError(f"scene folder holds several .xml files ({names}); pass the path of one of them",
+                           path=folder, field="scene")
+    return xmls[0]
+
+
+def _first_perspective_sensor_id(xml_path: Path) -> str:
+    """Id of the first perspective (or thin-lens) sensor; :data:`DEFAULT_CAMERA_ID` if it has none."""
+    try:
+        root = ET.parse(xml_path).getroot()
+    except ET.ParseError as exc:
+        raise SimSpadError(f"malformed XML: {exc}", path=xml_path) from None
+    if root.tag != "scene":
+        raise SimSpadError(f"root element is <{root.tag}>, expected <scene>", path=xml_path, field="scene")
+    for sensor in root.iter("sensor"):
+        if sensor.get("type") in _PERSPECTIVE_TYPES:
+            return sensor.get("id") or DEFAULT_CAMERA_ID
+    raise SimSpadError("the scene has no perspective sensor (<sensor type=\"perspective\">)", path=xml_path,
+                       field="sensor")
+
+
+def _user_info(xml_path: Path, *, name: str) -> SceneInfo:
+    xml_path = xml_path.resolve()
+    folder = xml_path.parent
+    camera_id = _first_perspective_sensor_id(xml_path)
+    meta = {}
+    toml_path = xml_path.parent / "scene.toml"
+    if toml_path.is_file():
+        meta = _meta_fields(_read_toml(toml_path), toml_path, toml_path.parent)
+    return SceneInfo(name=name, folder=folder, camera_id=meta.get("camera_id", camera_id),
+                     default_trajectory=meta.get("default_trajectory"),
+                     description=meta.get("description", f"user scene {xml_path.name}"),
+                     objects=meta.get("objects", ()), source=xml_path, builtin=False)
+
+
+_BUILDERS: dict[tuple[str, int], object] = {}
+
+
+def _load_builder(path: Path):
+    """Import a ``scene.py`` by path (cached per file and modification time)."""
+    key = (str(path), path.stat().st_mtime_ns)
+    if key not in _BUILDERS:
+        spec = importlib.util.spec_from_file_location(f"simspad_scene_{path.parent.name.replace('-', '_')}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        _BUILDERS[key] = module
+    return _BUILDERS[key]
