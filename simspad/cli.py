@@ -48,14 +48,17 @@ def cli(debug: bool) -> None:
 @click.option("--spp", type=int, default=16, show_default=True, help="Samples per pixel.")
 @click.option("--max-flow", "max_flow_px", type=float, default=0.5, show_default=True,
               help="Largest image motion between keyframes (pixels).")
+@click.option("--min-rate", "min_rate_hz", type=float, default=1000.0, show_default=True,
+              help="Lowest keyframe rate (Hz), whatever the motion.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Render seed (frozen Monte Carlo noise).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
-def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, seed, out_dir):
+def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own)."""
     from simspad.render.renderer import render_sequence
 
     summary = render_sequence(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
-                              spp=spp, max_flow_px=max_flow_px, seed=seed, out_dir=out_dir, progress=True)
+                              spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
+                              out_dir=out_dir, progress=True)
     click.echo(summary.describe())
 
 

@@ -43,6 +43,12 @@ class SpecError(SimSpadError):
         super().__init__("\n".join(self.errors), path=None)
         self.path = None if path is None else str(path)
 
+    def format(self) -> str:
+        # Each line names its own file and field; prefix the path only to lines that lack it.
+        if self.path is None:
+            return self.message
+        return "\n".join(line if line.startswith(self.path) else f"{self.path}: {line}" for line in self.errors)
+
 
 class InputError(SimSpadError):
     """A malformed input file (render directory, trajectory, recording, submission)."""

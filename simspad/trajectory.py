@@ -66,9 +66,10 @@ class Trajectory:
     """
 
     def __init__(self, times_s, positions_m, quaternions_xyzw, *, source: str = "<trajectory>"):
-        times_s = np.asarray(times_s, dtype=np.float64).reshape(-1)
-        positions_m = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
-        quaternions_xyzw = np.asarray(quaternions_xyzw, dtype=np.float64).reshape(-1, 4)
+        # Own copies: they are made read-only below, which must not affect the caller's arrays.
+        times_s = np.array(times_s, dtype=np.float64).reshape(-1)
+        positions_m = _rows(positions_m, 3, "positions_m", source)
+        quaternions_xyzw = _rows(quaternions_xyzw, 4, "quaternions_xyzw", source)
         _check_keyframes(times_s, positions_m, quaternions_xyzw, source)
         norms = np.linalg.norm(quaternions_xyzw, axis=1, keepdims=True)
         quats = _sign_continuous(quaternions_xyzw / norms)
@@ -107,8 +108,9 @@ class Trajectory:
 
     @property
     def is_static(self) -> bool:
-        """True for a single keyframe."""
-        return len(self.times_s) == 1
+        """True when the pose never changes (one keyframe, or all keyframes equal)."""
+        return bool((self.positions_m == self.positions_m[0]).all()
+                    and (self.quaternions_xyzw == self.quaternions_xyzw[0]).all())
 
     # -- evaluation ----------------------------------------------------------------------------------------------
     def _clamped(self, t) -> tuple[np.ndarray, bool, np.ndarray]:
@@ -190,18 +192,23 @@ class TrajectorySet:
         out.update(self.objects)
         return out
 
+    @property
+    def is_static(self) -> bool:
+        """True when no body moves (then any time span is covered)."""
+        return not self._moving()
+
     def _moving(self) -> list[Trajectory]:
         return [tr for tr in self.bodies().values() if not tr.is_static]
 
     @property
     def t_start(self) -> float:
-        """Start of the span that all (non-static) bodies cover, seconds."""
+        """Start of the span that all moving bodies cover (all bodies when none moves), seconds."""
         moving = self._moving() or list(self.bodies().values())
         return max(tr.t_start for tr in moving) if moving else 0.0
 
     @property
     def t_end(self) -> float:
-        """End of the span that all (non-static) bodies cover, seconds."""
+        """End of the span that all moving bodies cover (all bodies when none moves), seconds."""
         moving = self._moving() or list(self.bodies().values())
         return min(tr.t_end for tr in moving) if moving else 0.0
 
@@ -238,6 +245,16 @@ def _check_keyframes(times_s, positions_m, quats, source: str, rows: list[str] |
         i = int(np.argmax(bad))
         raise InputError(f"quaternion has norm {norms[i]:.6g} (expected a unit quaternion, |norm - 1| ≤ "
                          f"{QUATERNION_NORM_TOLERANCE:g})", path=source, field=where(i))
+
+
+def _rows(values, n: int, name: str, source: str) -> np.ndarray:
+    """``values`` as a fresh (K, n) float64 array; a single row may be given flat."""
+    a = np.array(values, dtype=np.float64)
+    if a.ndim == 1 and a.shape[0] == n:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != n:
+        raise InputError(f"{name} has shape {a.shape} (expected (K, {n}))", path=source)
+    return a
 
 
 def _sign_continuous(quats: np.ndarray) -> np.ndarray:
@@ -827,7 +844,7 @@ def _to_csv(ts: TrajectorySet) -> str:
 
 def motion_summary(tr: Trajectory, *, rate_hz: float = 2000.0) -> dict[str, float]:
     """Duration (s), path length (m), max speed (m/s) and max angular rate (rad/s) sampled at ``rate_hz``."""
-    if tr.is_static:
+    if len(tr.times_s) == 1:
         return {"duration_s": 0.0, "path_length_m": 0.0, "max_speed_m_s": 0.0, "max_angular_rate_rad_s": 0.0,
                 "keyframes": 1}
     n = max(2, min(200_000, int(math.ceil((tr.t_end - tr.t_start) * rate_hz)) + 1))
@@ -853,7 +870,7 @@ def describe_trajectory(path) -> str:
         lines.append(f"  {name}:")
         lines.append(f"    keyframes        {s['keyframes']}  ({tr.t_start:.6g} – {tr.t_end:.6g} s)")
         lines.append(f"    duration         {s['duration_s']:.6g} s")
-        lines.append(f"    path length      {s['path_length_m']:.6g} m")
+        lines.append(f"    path length      {s['path_length_m']:.6g} m (of the body origin)")
         lines.append(f"    max speed        {s['max_speed_m_s']:.6g} m/s")
         lines.append(f"    max angular rate {s['max_angular_rate_rad_s']:.6g} rad/s "
                      f"({np.rad2deg(s['max_angular_rate_rad_s']):.4g} deg/s)")

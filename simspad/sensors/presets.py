@@ -33,6 +33,8 @@ class SpadParams:
     min_gate_s: float = 5.75e-9
     auto_max_probability: float = 0.9
     """``auto`` gate: longest gate keeping the 99th-percentile detection probability per bin at or below this."""
+    auto_percentile: float = 99.0
+    """Percentile of the first keyframe's pixels that the ``auto`` gate keeps at or below ``auto_max_probability``."""
     dcr_median_cps: float = 7.5
     dcr_log_sigma: float = 0.9
     """Log-normal spatial spread (σ of ln DCR) of the ordinary pixels."""
@@ -101,13 +103,20 @@ class EventParams:
     dark_current_e_s: float = 30.0
     """Junction leakage: adds to the photocurrent, sets the log floor."""
     shot_noise_rate_hz_at_1lux: float = 1.0
-    """Shot-noise event rate per pixel at 1 lx scene illuminance; scales as 1/sqrt(photocurrent)."""
+    """Shot-noise event rate of a pixel seeing the scene's mean luminance at 1 lx (ON + OFF)."""
+    shot_noise_current_exponent: float = 0.5
+    """Rate ∝ (photocurrent + dark current)^−exponent: 0.5 = relative shot-noise amplitude 1/sqrt(I)."""
     leak_rate_hz: float = 0.1
     leak_rate_log_sigma: float = 0.3
     hot_pixel_fraction: float = 1e-4
     hot_pixel_rate_hz: float = 200.0
     latency_s: float = 50e-6
+    """Fixed readout latency added to every event's timestamp."""
     jitter_s: float = 10e-6
+    """Gaussian timing jitter (σ) of the readout (the latency plus jitter is never negative)."""
+    substep_tolerance: float = 0.01
+    """Internal time step accuracy: within a step the photoreceptor output is interpolated linearly, within this
+    fraction of the pixel's smaller threshold of its exact path (sets crossing-time accuracy)."""
 
 
 SENSOR_KINDS: dict[str, type] = {"spad": SpadParams, "frames": FrameParams, "events": EventParams}

@@ -1,0 +1,330 @@
+"""Image-quality metrics of the evaluation protocol (DESIGN §8).
+
+Display mapping, applied identically to ground truth and reconstruction::
+
+    D(x) = srgb( clip(x / W, 0, 1) )
+
+with W the sequence white point (99th percentile of the ground-truth photon irradiance over the whole
+sequence) and ``srgb`` the IEC 61966-2-1 transfer curve (12.92·v below 0.0031308, 1.055·v^(1/2.4) − 0.055
+above; identical to ``colour.cctf_encoding(v, function="sRGB")``).
+
+Methods without an absolute scale (events only) are scored after a per-frame least-squares affine fit in log
+space: with x = ln(max(rec, ε_rec)) and y = ln(max(gt, ε_gt)) over all pixels, (a, b) minimise
+Σ (a·x + b − y)², and the aligned reconstruction is exp(a·x + b). The floors keep the logarithm finite:
+ε_gt = 10⁻³·W (one thousandth of the white point, far below what the display mapping resolves: 10⁻³ maps to
+sRGB 0.0129) and ε_rec = 10⁻³ × the 99th percentile of the reconstruction frame (its scale is arbitrary).
+
+PSNR and SSIM come from scikit-image with ``data_range=1`` on the display-mapped frames. PSNR is capped at
+:data:`PSNR_CAP_DB` (a frame identical to the ground truth would otherwise give +inf and poison the mean).
+
+MTF (Siemens star): along circles of radius r around the star's centre the star is a periodic pattern of
+``n_cycles`` periods, i.e. spatial frequency f = n_cycles / (2π r) cycles per pixel. The modulation at radius r
+is the amplitude of the n_cycles-th angular Fourier harmonic divided by the mean (the Michelson contrast of a
+sinusoid); MTF(f) = modulation(reconstruction) / modulation(ground truth) on the same circle, and MTF50 is the
+lowest frequency where it falls to 0.5.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+
+PSNR_CAP_DB = 100.0
+WHITE_PERCENTILE = 99.0
+LOG_FLOOR_REL = 1e-3
+
+
+# -- display mapping -------------------------------------------------------------------------------------------
+
+def srgb_encode(v: np.ndarray) -> np.ndarray:
+    """sRGB transfer curve (IEC 61966-2-1) of linear values in [0, 1]; float32 out."""
+    v = np.asarray(v, dtype=np.float32)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(np.maximum(v, 0.0031308), 1 / 2.4) - 0.055
+                    ).astype(np.float32)
+
+
+def display_map(img: np.ndarray, white: float) -> np.ndarray:
+    """Display-map linear irradiance ``img`` (ph s⁻¹ m⁻²) with white point ``white`` (same units) to [0, 1]."""
+    if not (np.isfinite(white) and white > 0):
+        raise ValueError(f"white point must be finite and > 0, got {white}")
+    return srgb_encode(np.clip(np.asarray(img, dtype=np.float64) / white, 0.0, 1.0))
+
+
+# -- white point -----------------------------------------------------------------------------------------------
+
+def white_point(gt_frames: np.ndarray | Callable[[], Iterable[np.ndarray]]) -> float:
+    """Sequence white point W: the 99th percentile of the ground-truth irradiance over the whole sequence.
+
+    Parameters
+    ----------
+    gt_frames : ndarray [N,H,W] or callable
+        The ground-truth frames, or a callable returning a fresh iterator of chunks (``[n,H,W]`` arrays) so
+        long sequences are read a few frames at a time (memory independent of length; exact result, equal to
+        ``np.percentile(all, 99)`` with linear interpolation).
+
+    Returns
+    -------
+    float
+        W in the units of the frames (ph s⁻¹ m⁻²). Falls back to the maximum, then 1, for an all-dark sequence.
+    """
+    if callable(gt_frames):
+        w = streamed_percentile(gt_frames, WHITE_PERCENTILE)
+        if not w > 0:
+            w = max((float(np.max(c)) for c in gt_frames()), default=0.0)
+    else:
+        a = np.asarray(gt_frames, dtype=np.float64)
+        w = float(np.percentile(a, WHITE_PERCENTILE))
+        if not w > 0:
+            w = float(a.max()) if a.size else 0.0
+    return float(w) if w > 0 else 1.0
+
+
+def _order_statistic(chunks: Callable[[], Iterable[np.ndarray]], rank: int, lo: float, hi: float,
+                     max_keep: int = 1 << 22) -> float:
+    """The ``rank``-th smallest value (0-based) among all chunk values, by histogram narrowing.
+
+    Each pass counts values below ``lo`` and histograms [lo, hi]; once the bin holding the rank has few enough
+    values, they are collected and sorted. Memory stays at ``max_keep`` values whatever the sequence length.
+    """
+    for _ in range(64):
+        below = 0
+        inside = 0
+        for c in chunks():
+            c = np.asarray(c, dtype=np.float64).ravel()
+            below += int(np.count_nonzero(c < lo))
+            inside += int(np.count_nonzero((c >= lo) & (c <= hi)))
+        if inside <= max_keep or hi <= lo:
+            vals = np.concatenate([c[(c >= lo) & (c <= hi)] for c in
+                                   (np.asarray(x, dtype=np.float64).ravel() for x in chunks())] or [np.empty(0)])
+            vals.sort()
+            return float(vals[rank - below])
+        edges = np.linspace(lo, hi, 4097)
+        hist = np.zeros(4096, np.int64)
+        for c in chunks():
+            c = np.asarray(c, dtype=np.float64).ravel()
+            hist += np.histogram(c[(c >= lo) & (c <= hi)], bins=edges)[0]
+        cum = below + np.cumsum(hist)
+        k = int(np.searchsorted(cum, rank, side="right"))
+        new_lo, new_hi = edges[k], edges[k + 1]
+        if new_lo == lo and new_hi == hi:
+            break
+        # the top edge of a numpy histogram bin is exclusive except for the last one: nudge to keep it closed
+        lo, hi = new_lo, np.nextafter(new_hi, -np.inf) if k < 4095 else new_hi
+    return float(lo)
+
+
+def streamed_percentile(chunks: Callable[[], Iterable[np.ndarray]], q: float) -> float:
+    """Exact ``np.percentile(all_values, q)`` (linear interpolation) over chunks read several times."""
+    n = 0
+    lo, hi = np.inf, -np.inf
+    for c in chunks():
+        c = np.asarray(c)
+        if c.size:
+            n += c.size
+            lo, hi = min(lo, float(c.min())), max(hi, float(c.max()))
+    if n == 0:
+        return 0.0
+    k = q / 100.0 * (n - 1)
+    k0 = int(np.floor(k))
+    v0 = _order_statistic(chunks, k0, lo, hi)
+    if k0 + 1 >= n or k == k0:
+        return v0
+    v1 = _order_statistic(chunks, k0 + 1, v0, hi)
+    return v0 + (k - k0) * (v1 - v0)
+
+
+# -- alignment of methods without absolute scale ---------------------------------------------------------------
+
+def _log_floored(img: np.ndarray, eps: float) -> np.ndarray:
+    return np.log(np.maximum(np.asarray(img, dtype=np.float64), eps))
+
+
+def log_floor_rec(rec: np.ndarray) -> float:
+    """Floor ε_rec of a reconstruction of arbitrary scale: 10⁻³ × its 99th percentile (> 0)."""
+    p = float(np.percentile(rec, WHITE_PERCENTILE)) if np.size(rec) else 0.0
+    if not (np.isfinite(p) and p > 0):
+        p = float(np.max(np.abs(rec))) if np.size(rec) else 0.0
+    return LOG_FLOOR_REL * p if p > 0 else 1e-30
+
+
+def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float) -> tuple[float, float]:
+    """Least-squares (a, b) of a·ln(rec) + b ≈ ln(gt) over all pixels of one frame.
+
+    Parameters
+    ----------
+    rec, gt : ndarray [H,W]
+        Reconstruction (any scale) and ground truth (ph s⁻¹ m⁻²).
+    white : float
+        Sequence white point W; the ground-truth floor is 10⁻³·W.
+
+    Returns
+    -------
+    (a, b) : floats. A constant reconstruction (zero log-variance) gives a = 0, b = mean(ln gt).
+    """
+    x = _log_floored(rec, log_floor_rec(rec)).ravel()
+    y = _log_floored(gt, LOG_FLOOR_REL * white).ravel()
+    xm, ym = x.mean(), y.mean()
+    dx = x - xm
+    sxx = float(dx @ dx)
+    a = float(dx @ (y - ym)) / sxx if sxx > 0 else 0.0
+    return a, float(ym - a * xm)
+
+
+def align_log_affine(rec: np.ndarray, gt: np.ndarray, white: float) -> np.ndarray:
+    """The reconstruction after the per-frame log-space affine fit: exp(a·ln(rec) + b), float32."""
+    a, b = affine_log_fit(rec, gt, white)
+    x = _log_floored(rec, log_floor_rec(rec))
+    return np.exp(a * x + b).astype(np.float32)
+
+
+# -- image metrics ---------------------------------------------------------------------------------------------
+
+def psnr_db(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
+    """PSNR (dB) of display-mapped frames in [0, 1] (scikit-image, data_range=1), capped at PSNR_CAP_DB."""
+    from skimage.metrics import mean_squared_error
+
+    mse = float(mean_squared_error(np.asarray(gt_display, np.float64), np.asarray(rec_display, np.float64)))
+    if mse <= 10 ** (-PSNR_CAP_DB / 10):
+        return PSNR_CAP_DB
+    from skimage.metrics import peak_signal_noise_ratio
+
+    return float(peak_signal_noise_ratio(np.asarray(gt_display, np.float64), np.asarray(rec_display, np.float64),
+                                         data_range=1.0))
+
+
+def ssim(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
+    """SSIM of display-mapped frames in [0, 1] (scikit-image, data_range=1, 7×7 window or the largest odd
+    window that fits a tiny image)."""
+    from skimage.metrics import structural_similarity
+
+    g = np.asarray(gt_display, np.float64)
+    r = np.asarray(rec_display, np.float64)
+    win = min(7, min(g.shape[-2:]))
+    win -= 1 - win % 2
+    if win < 3:
+        return float("nan")
+    return float(structural_similarity(g, r, data_range=1.0, win_size=win))
+
+
+def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: bool) -> dict:
+    """PSNR and SSIM of one frame under the protocol (alignment first when not ``absolute_scale``).
+
+    Returns ``{"psnr_db", "ssim", "fit_a", "fit_b"}`` (fit_* NaN for absolute-scale methods).
+    """
+    rec = np.asarray(rec, dtype=np.float64)
+    a = b = float("nan")
+    if not absolute_scale:
+        a, b = affine_log_fit(rec, gt, white)
+        rec = np.exp(a * _log_floored(rec, log_floor_rec(rec)) + b)
+    rd, gd = display_map(rec, white), display_map(gt, white)
+    return {"psnr_db": psnr_db(rd, gd), "ssim": ssim(rd, gd), "fit_a": a, "fit_b": b}
+
+
+# -- MTF from a Siemens star ------------------------------------------------------------------------------------
+
+def _circle_samples(img: np.ndarray, cy: float, cx: float, r: float, n_samples: int) -> np.ndarray:
+    from scipy.ndimage import map_coordinates
+
+    theta = np.arange(n_samples) * (2 * np.pi / n_samples)
+    coords = np.vstack([cy + r * np.sin(theta), cx + r * np.cos(theta)])
+    return map_coordinates(np.asarray(img, np.float64), coords, order=1, mode="nearest")
+
+
+def circle_modulation(img: np.ndarray, cy: float, cx: float, r: float, n_cycles: int) -> float:
+    """Modulation of the ``n_cycles``-th angular harmonic on the circle of radius ``r``: 2|F_n| / F_0."""
+    n_samples = max(64, int(8 * n_cycles), int(np.ceil(2 * np.pi * r * 2)))
+    v = _circle_samples(img, cy, cx, r, n_samples)
+    f = np.fft.rfft(v)
+    mean = abs(f[0])
+    return float(2 * abs(f[n_cycles]) / mean) if mean > 0 else 0.0
+
+
+def siemens_star_geometry(gt: np.ndarray, max_cycles: int = 128) -> tuple[float, float, int, float]:
+    """Locate a Siemens star in a ground-truth frame.
+
+    The centre is searched on a grid around the image centre (± 1/8 of the size, 1 px steps after a coarse
+    pass) to maximise the dominant angular harmonic on a mid-radius circle; ``n_cycles`` is that harmonic.
+
+    Returns
+    -------
+    (cy, cx, n_cycles, r_max_px)
+    """
+    gt = np.asarray(gt, np.float64)
+    H, W = gt.shape
+    r_max = 0.45 * min(H, W)
+    r_mid = 0.6 * r_max
+
+    def best_harmonic(cy, cx):
+        v = _circle_samples(gt, cy, cx, r_mid, 1024)
+        spec = np.abs(np.fft.rfft(v - v.mean()))[1:max_cycles + 1]
+        k = int(np.argmax(spec))
+        return spec[k], k + 1
+
+    span = max(2, min(H, W) // 8)
+    best = (-1.0, (H - 1) / 2, (W - 1) / 2, 1)
+    for step, centre in ((max(1, span // 4), None), (1, True)):
+        cy0, cx0 = ((H - 1) / 2, (W - 1) / 2) if centre is None else (best[1], best[2])
+        rng = span if centre is None else max(1, span // 4)
+        for dy in np.arange(-rng, rng + 1, step):
+            for dx in np.arange(-rng, rng + 1, step):
+                power, k = best_harmonic(cy0 + dy, cx0 + dx)
+                if power > best[0]:
+                    best = (power, cy0 + dy, cx0 + dx, k)
+    _, cy, cx, n = best
+    r_max = min(r_max, cy, cx, H - 1 - cy, W - 1 - cx)
+    return float(cy), float(cx), int(n), float(r_max)
+
+
+def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,
+                geometry: tuple[float, float, int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """MTF of a reconstruction of a Siemens star relative to its ground truth.
+
+    Parameters
+    ----------
+    rec, gt : ndarray [H,W]
+        Reconstruction and ground truth (linear; any common scale: modulation is scale-free).
+    n_radii : int
+        Circles sampled between the Nyquist radius (f = 0.5 cycles/px) and the star's edge.
+    geometry : (cy, cx, n_cycles, r_max), optional
+        From :func:`siemens_star_geometry` (computed from ``gt`` if omitted).
+
+    Returns
+    -------
+    freq_cyc_px, mtf : ndarrays sorted by increasing frequency.
+    """
+    cy, cx, n, r_max = geometry or siemens_star_geometry(gt)
+    r_min = max(n / np.pi, 2.0)  # f = n / (2π r) = 0.5 cycles/px
+    if r_max <= r_min:
+        return np.empty(0), np.empty(0)
+    radii = np.geomspace(r_min, r_max, n_radii)
+    m_gt = np.array([circle_modulation(gt, cy, cx, r, n) for r in radii])
+    m_rec = np.array([circle_modulation(rec, cy, cx, r, n) for r in radii])
+    freq = n / (2 * np.pi * radii)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mtf = np.where(m_gt > 1e-6, m_rec / m_gt, np.nan)
+    order = np.argsort(freq)
+    return freq[order], mtf[order]
+
+
+def mtf50(freq_cyc_px: np.ndarray, mtf: np.ndarray) -> float:
+    """Lowest frequency (cycles/px) where the MTF falls to 0.5, linearly interpolated; the highest measured
+    frequency if it never does, NaN if it starts below 0.5 or there is no data."""
+    ok = np.isfinite(mtf)
+    f, m = np.asarray(freq_cyc_px)[ok], np.asarray(mtf)[ok]
+    if f.size == 0 or m[0] < 0.5:
+        return float("nan")
+    below = np.nonzero(m < 0.5)[0]
+    if below.size == 0:
+        return float(f[-1])
+    i = int(below[0])
+    f0, f1, m0, m1 = f[i - 1], f[i], m[i - 1], m[i]
+    return float(f0 + (m0 - 0.5) * (f1 - f0) / (m0 - m1))
+
+
+def iter_chunks(read: Callable[[slice], np.ndarray], n: int, chunk: int = 16) -> Callable[[], Iterator[np.ndarray]]:
+    """A callable yielding ``read(slice(i, i+chunk))`` over ``range(0, n, chunk)`` (for :func:`white_point`)."""
+    def gen():
+        for i in range(0, n, chunk):
+            yield read(slice(i, min(i + chunk, n)))
+    return gen

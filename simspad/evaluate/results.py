@@ -1,0 +1,120 @@
+"""The results directory shared by ``simspad evaluate``, ``simspad score`` and ``simspad leaderboard``.
+
+Layout (one directory per run, written atomically)::
+
+    results.csv        one row per method × recording (columns RESULT_COLUMNS)
+    frames.csv         per-frame detail (FRAME_COLUMNS)
+    mtf.csv            MTF curves of Siemens-star recordings (MTF_COLUMNS), when any
+    results.json       metadata: version, time, target, evaluation rate, protocol constants, rows
+    images/<rec>/gt.png, images/<rec>/<method>.png, images/<rec>/<method>_vs_gt.png
+                       display-mapped crops of the chosen instant (ground truth beside the method)
+    reconstructions/<rec>/<method>.h5
+                       the reconstructions as scored (/t [N] float64 s, /flux [N,H,W] float32 ph s⁻¹ m⁻²)
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "psnr_db", "ssim",
+                  "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
+                  "n_frames", "runtime_s", "white_point_ph_s_m2", "image", "error")
+FRAME_COLUMNS = ("method", "recording", "frame", "t_s", "psnr_db", "ssim", "fit_a", "fit_b")
+MTF_COLUMNS = ("method", "recording", "freq_cyc_px", "mtf")
+CROP_PX = 256
+
+
+def slug(text: str) -> str:
+    """A filesystem-safe name for ``text`` (a short hash is appended when characters had to be replaced)."""
+    s = re.sub(r"[^A-Za-z0-9_.-]", "_", str(text)).strip(".") or "_"
+    if s != text:
+        s = f"{s[:60]}-{hashlib.sha1(str(text).encode()).hexdigest()[:8]}"
+    return s
+
+
+def recording_key(sequence: str, lux: float) -> str:
+    """The key of a recording: ``<sequence>_<lux>lx`` (lux in shortest ``%g`` form), e.g. ``office_10lx``."""
+    return f"{sequence}_{lux:g}lx"
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else repr(v)
+    return "" if v is None else str(v)
+
+
+def write_csv(path: Path, columns, rows) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(columns)
+        for r in rows:
+            w.writerow([_fmt(r.get(c)) for c in columns])
+
+
+def _parse(col: str, v: str):
+    if col in ("method", "label", "sensors", "scene", "sequence", "recording", "image", "error"):
+        return v
+    if col == "absolute_scale":
+        return v.strip().lower() in ("true", "1", "yes")
+    if col in ("n_frames", "frame"):
+        return int(v) if v not in ("", "nan") else 0
+    try:
+        return float(v)
+    except ValueError:
+        return float("nan")
+
+
+def read_csv(path: Path) -> list[dict]:
+    """Rows of a results CSV with numbers parsed (unknown columns kept as text)."""
+    with open(path, newline="", encoding="utf-8") as f:
+        return [{k: _parse(k, v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def save_png(path: Path, img01: np.ndarray) -> None:
+    """Write a [H,W] image in [0, 1] as an 8-bit greyscale PNG."""
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(np.round(np.clip(img01, 0, 1) * 255).astype(np.uint8), mode="L").save(path)
+
+
+def crop(img: np.ndarray, size: int = CROP_PX) -> np.ndarray:
+    """The central ``size``×``size`` crop (the whole image when smaller)."""
+    h, w = img.shape[:2]
+    y0, x0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
+    return img[y0:y0 + size, x0:x0 + size]
+
+
+def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_rows: list[dict], meta: dict) -> None:
+    """Write the tables and the metadata of a results directory into ``tmp`` (images are written by callers)."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    write_csv(tmp / "results.csv", RESULT_COLUMNS, rows)
+    write_csv(tmp / "frames.csv", FRAME_COLUMNS, frame_rows)
+    if mtf_rows:
+        write_csv(tmp / "mtf.csv", MTF_COLUMNS, mtf_rows)
+    meta = dict(meta)
+    meta["results"] = [{c: (None if isinstance(r.get(c), float) and math.isnan(r.get(c)) else r.get(c))
+                        for c in RESULT_COLUMNS} for r in rows]
+    (tmp / "results.json").write_text(json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n",
+                                      encoding="utf-8")
+
+
+def check_output_dir(out_dir: Path) -> None:
+    """Refuse to replace a non-empty directory that is not a SimSPAD results directory."""
+    from simspad.errors import SimSpadError
+
+    if out_dir.exists():
+        if not out_dir.is_dir():
+            raise SimSpadError("exists and is not a directory", path=out_dir, field="--out")
+        if any(out_dir.iterdir()) and not (out_dir / "results.json").is_file():
+            raise SimSpadError("exists, is not empty and is not a SimSPAD results directory (refusing to "
+                               "replace it)", path=out_dir, field="--out")

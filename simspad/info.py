@@ -1,0 +1,71 @@
+"""``simspad info``: a readable summary of whatever file or folder it is given.
+
+Dispatch on the path: a dataset spec or trajectory file is summarised here (:mod:`simspad.spec`,
+:mod:`simspad.trajectory`); a recording (``.h5``) or a dataset directory (``manifest.json``) by
+:mod:`simspad.jobs_info`.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from simspad.errors import SimSpadError
+
+_TRAJECTORY_SUFFIXES = (".json", ".csv", ".txt", ".tum")
+_RECORDING_SUFFIXES = (".h5", ".hdf5")
+_TRAJECTORY_TOML_KEYS = {"camera", "objects"}
+
+
+def describe(path) -> str:
+    """Summary text of a spec (``.toml``), trajectory (``.toml``/``.json``/``.csv``/``.txt``/``.tum``),
+    recording (``.h5``) or dataset directory (holding ``manifest.json``).
+
+    Raises
+    ------
+    SimSpadError
+        Missing path or a kind of file ``info`` does not know; malformed files raise the loaders' errors.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise SimSpadError("no such file or directory", path=path)
+    if path.is_dir():
+        if (path / "manifest.json").is_file():
+            from simspad.jobs_info import describe_dataset
+
+            return describe_dataset(path)
+        raise SimSpadError("not a dataset directory (no manifest.json; expected a dataset directory, a spec, "
+                           "a trajectory or a recording)", path=path)
+    suffix = path.suffix.lower()
+    if path.name == "manifest.json":
+        from simspad.jobs_info import describe_dataset
+
+        return describe_dataset(path.parent)
+    if suffix in _RECORDING_SUFFIXES:
+        from simspad.jobs_info import describe_recording
+
+        return describe_recording(path)
+    if suffix == ".toml":
+        if _is_trajectory_toml(path):
+            from simspad.trajectory import describe_trajectory
+
+            return describe_trajectory(path)
+        from simspad.spec import describe_spec
+
+        return describe_spec(path)
+    if suffix in _TRAJECTORY_SUFFIXES:
+        from simspad.trajectory import describe_trajectory
+
+        return describe_trajectory(path)
+    raise SimSpadError(f"unknown kind of file {path.suffix or '(no suffix)'!r} (expected a spec .toml, a trajectory "
+                       ".toml/.json/.csv/.txt/.tum, a recording .h5 or a dataset directory)", path=path)
+
+
+def _is_trajectory_toml(path: Path) -> bool:
+    """A TOML file with a top-level camera/objects table is a trajectory; anything else is read as a spec
+    (whose loader reports syntax errors with their line)."""
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, OSError, UnicodeDecodeError):
+        return False
+    return bool(_TRAJECTORY_TOML_KEYS & set(doc))

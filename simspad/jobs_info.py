@@ -1,0 +1,201 @@
+"""``simspad info`` for recordings and datasets: what is inside, how big, how fast the data streams.
+
+Bandwidths follow DESIGN §8: a SPAD pixel reads out 1 bit per binary frame (1/bin_s), a conventional frame
+``bit_depth`` bits per pixel per frame, an event 32 bits. Event rates are per pixel of the simulation grid.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from simspad.manifest import read_manifest
+
+_SPAD_SAMPLE_BINS = 1024
+"""Binary frames read to estimate the mean detection probability (cheap: the file is not read whole)."""
+
+
+def _fmt_bytes(n) -> str:
+    if n is None:
+        return "-"
+    n = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} TiB"
+
+
+def _fmt_time(x) -> str:
+    if isinstance(x, str):
+        return x
+    x = float(x)
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("ns", 1e-9)):
+        if abs(x) >= scale:
+            return f"{x / scale:.4g} {unit}"
+    return f"{x:g} s"
+
+
+def _group_bytes(h5, group: str) -> int:
+    """Bytes stored on disk by the datasets of ``group``."""
+    total = 0
+
+    def visit(_name, obj):
+        nonlocal total
+        if hasattr(obj, "id") and hasattr(obj.id, "get_storage_size"):
+            total += obj.id.get_storage_size()
+
+    h5[group].visititems(visit)
+    return total
+
+
+def _attr_line(attrs: dict, keys: tuple[str, ...]) -> str:
+    parts = []
+    for k in keys:
+        if k in attrs:
+            v = attrs[k]
+            if k.endswith("_s"):
+                v = _fmt_time(v)
+            elif isinstance(v, float):
+                v = f"{v:.4g}"
+            parts.append(f"{k}={v}")
+    return ", ".join(parts)
+
+
+def describe_recording(path) -> str:
+    """Summary of a recording: scene, lux, grid, sensors with their parameters, sizes, event rates and the
+    readout bandwidth of each sensor (kHz and bits per pixel per second).
+
+    Raises
+    ------
+    InputError
+        A missing, corrupt or foreign file (from :func:`simspad.io.recording.open_recording`).
+    """
+    from simspad.io.recording import open_recording
+
+    path = Path(path)
+    with open_recording(path) as rec:
+        a = rec.attrs
+        W, H, dur = rec.width, rec.height, rec.duration_s
+        n_px = W * H
+        lines = [f"recording {path}",
+                 f"  size        {_fmt_bytes(path.stat().st_size)}",
+                 f"  sequence    {rec.sequence} (scene {rec.scene}, trajectory {a.get('trajectory', '-')})",
+                 f"  lux         {rec.lux:g}",
+                 f"  grid        {W}×{H} px, {dur * 1e3:.4g} ms",
+                 f"  seed        {a.get('seed', '-')}, created {a.get('created_utc', '-')}",
+                 f"  software    simspad {a.get('simspad_version', '-')}"]
+        if a.get("recording_hash"):
+            lines.append(f"  hash        {str(a['recording_hash'])[:16]}")
+        if rec.has("gt"):
+            t = rec.gt_t
+            rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
+            lines.append(f"  gt          {len(t)} sharp frames at {rate:.4g} Hz, {_fmt_bytes(_group_bytes(rec.h5, 'gt'))}"
+                         + (", depth" if "gt/depth" in rec.h5 else ""))
+        lines.append("  sensors")
+        if rec.has("spad"):
+            lines += _spad_lines(rec, n_px, dur)
+        if rec.has("frames"):
+            lines += _frame_lines(rec, dur)
+        if rec.has("events"):
+            lines += _event_lines(rec, n_px, dur)
+        if not rec.sensors:
+            lines.append("    (none)")
+    return "\n".join(lines)
+
+
+def _spad_lines(rec, n_px: int, dur: float) -> list[str]:
+    sa = rec.spad_attrs
+    n_bins = rec.spad_n_bins
+    bin_s = float(sa["bin_s"])
+    sample = min(n_bins, _SPAD_SAMPLE_BINS)
+    p1 = float(rec.spad_counts(0, sample).sum()) / (sample * n_px) if sample else float("nan")
+    dcr = rec.dcr_cps
+    return [f"    spad      {n_bins} binary frames ({1 / bin_s / 1e3:.4g} kHz), {_fmt_bytes(_group_bytes(rec.h5, 'spad'))}",
+            f"              {_attr_line(sa, ('preset', 'bin_s', 'gate_s', 'pixel_pitch_m', 'fill_factor', 'qe', 'dead_time_s'))}",
+            f"              mean P(1) {p1:.4f} (first {sample} frames), DCR median {np.median(dcr):.3g} cps",
+            f"              bandwidth {1 / bin_s / 1e3:.4g} kHz/pixel = {1 / bin_s:.4g} bit/pixel/s "
+            f"({n_px / bin_s / 8 / 2**20:.4g} MiB/s for the grid)"]
+
+
+def _frame_lines(rec, dur: float) -> list[str]:
+    fa = rec.frames_attrs
+    k = rec.n_frames
+    t0 = rec.frames_t_start
+    rate = float(fa.get("frame_rate_hz", (k - 1) / (t0[-1] - t0[0]) if k > 1 and t0[-1] > t0[0] else 0.0))
+    bits = int(fa.get("bit_depth", 16))
+    mean_dn = float(rec.frames_dn(0).mean()) if k else float("nan")
+    return [f"    frames    {k} frames at {rate:.4g} fps, {_fmt_bytes(_group_bytes(rec.h5, 'frames'))}",
+            f"              {_attr_line(fa, ('preset', 'exposure_s', 'gain_dn_per_e', 'read_noise_e', 'full_well_e', 'bit_depth', 'qe', 'pixel_pitch_m'))}",
+            f"              first frame mean {mean_dn:.1f} DN",
+            f"              bandwidth {rate / 1e3:.4g} kHz/pixel = {rate * bits:.4g} bit/pixel/s"]
+
+
+def _event_lines(rec, n_px: int, dur: float) -> list[str]:
+    ea = rec.events_attrs
+    n = rec.n_events
+    rate_px = n / (n_px * dur) if dur > 0 else float("nan")
+    labels = ""
+    if n and "events/label" in rec.h5:
+        counts = np.zeros(4, np.int64)
+        step = 1 << 22
+        ds = rec.h5["events/label"]
+        for i in range(0, n, step):
+            counts += np.bincount(np.minimum(ds[i : i + step], 3), minlength=4)[:4]
+        labels = ", ".join(f"{name} {c / n:.1%}" for name, c in zip(("signal", "shot", "leak", "hot"), counts))
+    on = ""
+    if n:
+        p = rec.h5["events/p"][: min(n, 1 << 22)]
+        on = f", ON {p.mean():.1%}"
+    return [f"    events    {n} events ({n / dur if dur > 0 else float('nan'):.4g} ev/s, {rate_px:.4g} ev/pixel/s{on}), "
+            f"{_fmt_bytes(_group_bytes(rec.h5, 'events'))}",
+            f"              {_attr_line(ea, ('preset', 'threshold_on', 'threshold_off', 'threshold_sigma', 'refractory_s', 'pixel_pitch_m'))}",
+            *( [f"              labels: {labels}"] if labels else []),
+            f"              bandwidth {rate_px / 1e3:.4g} kHz/pixel = {rate_px * 32:.4g} bit/pixel/s (32 bit/event)"]
+
+
+def describe_dataset(path) -> str:
+    """Summary of a dataset directory: spec, and every recording's status, size and timings.
+
+    Raises
+    ------
+    InputError
+        No manifest, or a manifest that is not a SimSPAD dataset's.
+    """
+    path = Path(path)
+    m = read_manifest(path)
+    recs = m["recordings"]
+    by_status = {s: sum(e["status"] == s for e in recs) for s in ("complete", "pending", "failed")}
+    total = sum(e.get("size") or 0 for e in recs)
+    spec = m.get("spec") or {}
+    lines = [f"dataset {path}",
+             f"  name        {m.get('name')} (spec hash {str(m.get('spec_hash', ''))[:16]}, seed {m.get('seed')})",
+             f"  created     {m.get('created_utc')}, updated {m.get('updated_utc', '-')}",
+             f"  lux         {', '.join(f'{x:g}' for x in spec.get('lux', []))}",
+             f"  sensors     {', '.join(spec.get('sensors', {})) or '-'}",
+             f"  recordings  {len(recs)}: {by_status['complete']} complete, {by_status['pending']} pending, "
+             f"{by_status['failed']} failed; {_fmt_bytes(total)}"]
+    rows = [("sequence", "lux", "status", "size", "simulate", "path")]
+    for e in recs:
+        t = (e.get("timings") or {}).get("simulate_s")
+        rows.append((e["sequence"], f"{e['lux']:g}", e["status"], _fmt_bytes(e.get("size")),
+                     "-" if t is None else f"{t:.1f} s", e["path"]))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for r in rows:
+        lines.append("    " + "  ".join(c.ljust(w) if i in (0, 2, 5) else c.rjust(w)
+                                        for i, (c, w) in enumerate(zip(r, widths))).rstrip())
+    for e in recs:
+        if e["status"] == "failed" and e.get("error"):
+            lines.append(f"  failed {e['path']}: {e['error']}")
+    renders = m.get("renders", [])
+    if renders:
+        lines.append(f"  renders     {len(renders)}")
+        for r in renders:
+            t = (r.get("timings") or {}).get("render_s")
+            lines.append(f"    {r.get('path')}: {r.get('status')}, {r.get('n_keyframes') or '-'} keyframes"
+                         + ("" if t is None else f", {t:.1f} s"))
+    return "\n".join(lines)
+
+
+__all__ = ["describe_recording", "describe_dataset"]

@@ -1,0 +1,63 @@
+"""The CLI frame: help lists the subcommands; bad input gives one line and exit 2; --debug shows tracebacks."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from simspad.cli import main
+
+SUBCOMMANDS = ("render", "simulate", "generate", "evaluate", "leaderboard", "score", "snr", "info", "scenes")
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "simspad.cli", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_help_lists_subcommands():
+    proc = _run("--help")
+    assert proc.returncode == 0
+    commands = proc.stdout.split("Commands:")[1]
+    for name in SUBCOMMANDS:
+        assert f"\n  {name} " in commands, name
+
+
+def test_version(capsys):
+    from simspad import __version__
+
+    assert main(["--version"]) == 0
+    assert __version__ in capsys.readouterr().out
+
+
+def test_info_on_missing_path_is_one_line(tmp_path, capsys):
+    assert main(["info", str(tmp_path / "nothing.h5")]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"simspad: error: {tmp_path / 'nothing.h5'}: no such file or directory\n"
+
+
+def test_info_on_unknown_kind_of_file(tmp_path, capsys):
+    p = tmp_path / "notes.pdf"
+    p.write_bytes(b"%PDF")
+    assert main(["info", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown kind of file '.pdf'" in err
+    d = tmp_path / "folder"
+    d.mkdir()
+    assert main(["info", str(d)]) == 2
+    assert "no manifest.json" in capsys.readouterr().err
+
+
+def test_bad_input_has_no_traceback_unless_debug(tmp_path):
+    bad = tmp_path / "t.csv"
+    bad.write_text("t,tx,ty,tz,qx,qy,qz,qw\n1,0,0,0,0,0,0,1\n0,0,0,0,0,0,0,1\n")
+    plain = _run("info", str(bad))
+    assert plain.returncode == 2
+    assert plain.stderr.count("\n") == 1 and "Traceback" not in plain.stderr
+    assert f"{bad}: line 3: " in plain.stderr
+    debug = _run("--debug", "info", str(bad))
+    assert debug.returncode != 0 and "Traceback" in debug.stderr and "InputError" in debug.stderr
+
+
+def test_usage_error_exits_nonzero(capsys):
+    assert main(["info"]) == 2
+    assert "Missing argument" in capsys.readouterr().err

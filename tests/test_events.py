@@ -1,0 +1,187 @@
+"""Event camera: threshold counts, noise statistics vs lux, refractory period, unclumped timestamps, lag."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from simspad.errors import SimSpadError
+from simspad.io.recording import RecordingWriter, open_recording
+from simspad.radiometry import flux_scale
+from simspad.sensors import events
+from simspad.sensors.presets import EventParams
+from simspad.timeline import Timeline
+
+QUIET = dict(leak_rate_hz=0.0, shot_noise_rate_hz_at_1lux=0.0, hot_pixel_fraction=0.0, latency_s=0.0, jitter_s=0.0)
+#: Photocurrent per unit photon irradiance of the preset pixel (e⁻ s⁻¹ per photon s⁻¹ m⁻²).
+E_PER_FLUX = EventParams().pixel_pitch_m ** 2 * EventParams().fill_factor * EventParams().qe
+
+
+def _run(tmp_path, times, frames, params, seed=0, lux=1000.0, t0=None, t1=None, name="e.h5", **kw):
+    tl = Timeline.from_arrays(np.asarray(times, np.float64), np.asarray(frames, np.float32))
+    t0 = tl.t_start if t0 is None else t0
+    t1 = tl.t_end if t1 is None else t1
+    path = tmp_path / name
+    with RecordingWriter(path, {"width": tl.width, "height": tl.height, "duration_s": t1 - t0, "lux": lux}) as w:
+        attrs = events.simulate_events(w, tl, t0, t1, params, np.random.default_rng(seed), lux, **kw)
+    with open_recording(path) as rec:
+        ev = rec.events(t0, t1 + 1.0)
+        ev["ms_to_idx"] = rec.ms_to_idx.copy()
+        assert rec.n_events == ev["t"].size
+    maps = events.draw_pixel_maps(params, (tl.height, tl.width), np.random.default_rng(seed))
+    return ev, attrs, maps
+
+
+def _per_pixel(ev, shape, mask=None):
+    idx = ev["y"].astype(np.int64) * shape[1] + ev["x"]
+    if mask is not None:
+        idx = idx[mask]
+    return np.bincount(idx, minlength=shape[0] * shape[1])
+
+
+def test_log_ramp_gives_floor_of_contrast_over_each_pixels_threshold(tmp_path):
+    """A ramp of Δ log units then a hold: each pixel emits floor(Δ/θ_i) events of the ramp's sign."""
+    H, W = 16, 40
+    params = EventParams(**QUIET)
+    times = np.linspace(0.0, 0.2, 101)
+    ramp = np.clip(times / 0.1, 0, 1)
+    delta = np.linspace(0.4, 3.0, W)
+    sign = np.where(np.arange(H) < H // 2, 1.0, -1.0)
+    log_y = ramp[:, None, None] * sign[None, :, None] * delta[None, None, :]
+    ev, attrs, maps = _run(tmp_path, times, 1e18 * np.exp(log_y), params)
+    assert attrs["threshold_sigma"] == 0.03 and attrs["n_events_by_label"].startswith('{"signal"')
+    d = np.abs(sign[:, None] * delta[None, :]).ravel()
+    theta = np.where(np.repeat(sign, W) > 0, maps.threshold_on, maps.threshold_off)
+    expected = np.floor(d / theta)
+    on = _per_pixel(ev, (H, W), ev["p"] == 1).reshape(H, W)
+    off = _per_pixel(ev, (H, W), ev["p"] == 0).reshape(H, W)
+    assert off[: H // 2].sum() == 0 and on[H // 2:].sum() == 0
+    counts = (on + off).ravel()
+    assert np.mean(counts == expected) >= 0.99
+    assert np.max(np.abs(counts - expected)) <= 1
+    # the mismatch shows: pixels of one column disagree, as floor(Δ/θ_i) predicts
+    assert np.std(counts.reshape(H, W)[:, -1]) > 0
+    assert np.all(ev["label"] == events.LABEL_SIGNAL)
+
+
+def test_static_scene_gives_only_noise_whose_rate_rises_as_light_falls(tmp_path):
+    H, W, T = 32, 48, 1.0
+    params = EventParams(shot_noise_rate_hz_at_1lux=1.0, leak_rate_hz=2.0, hot_pixel_fraction=0.02,
+                         hot_pixel_rate_hz=200.0)
+    dead_s = params.latency_s + params.refractory_s
+    shot_counts = []
+    for lux in (1.0, 10.0, 100.0):
+        flux = flux_scale(1.0, lux)  # a grey flat field at the lux level's mean luminance
+        ev, attrs, maps = _run(tmp_path, [0.0, T], np.full((2, H, W), flux), params, seed=7, lux=lux,
+                               name=f"s{lux:g}.h5")
+        assert not np.any(ev["label"] == events.LABEL_SIGNAL), "a static scene has no signal events"
+        current = flux * E_PER_FLUX + params.dark_current_e_s
+        current_1lux = attrs["shot_noise_current_1lux_e_s"]
+        assert current_1lux == pytest.approx(flux / lux * E_PER_FLUX + params.dark_current_e_s, rel=1e-6)
+        rate = params.shot_noise_rate_hz_at_1lux * np.sqrt(current_1lux / current)
+        n_shot = int(np.sum(ev["label"] == events.LABEL_SHOT))
+        expected = rate * T * H * W
+        assert abs(n_shot - expected) < 5 * np.sqrt(expected) + 0.02 * expected, (lux, n_shot, expected)
+        shot_counts.append(n_shot)
+        # leak: ON events at each pixel's own rate (reference drift leak·θ_on per second)
+        leak = _per_pixel(ev, (H, W), ev["label"] == events.LABEL_LEAK)
+        assert np.all(ev["p"][ev["label"] == events.LABEL_LEAK] == 1)
+        assert np.mean(leak == np.floor(T * maps.leak_rate_hz)) > 0.97
+        # hot pixels: Poisson at the hot rate thinned by the dead time after each event
+        hot = _per_pixel(ev, (H, W), ev["label"] == events.LABEL_HOT)
+        is_hot = maps.hot_rate_hz > 0
+        assert hot[~is_hot].sum() == 0 and is_hot.sum() > 10
+        r_hot = params.hot_pixel_rate_hz / (1 + params.hot_pixel_rate_hz * dead_s)
+        expected_hot = r_hot * T * is_hot.sum()
+        assert abs(hot.sum() - expected_hot) < 5 * np.sqrt(expected_hot)
+    assert shot_counts[0] > shot_counts[1] > shot_counts[2]
+    assert shot_counts[0] > 5 * shot_counts[2]
+
+
+def test_refractory_period_is_respected_and_throttles_fast_changes(tmp_path):
+    H, W = 8, 16
+    params = EventParams(shot_noise_rate_hz_at_1lux=5.0, hot_pixel_fraction=0.1, hot_pixel_rate_hz=5000.0)
+    times = np.array([0.0, 0.002, 0.004, 0.006])
+    log_y = np.array([0.0, 4.0, 0.0, 4.0])[:, None, None] * np.ones((1, H, W))  # 200 contrast units per s
+    ev, attrs, maps = _run(tmp_path, times, 1e18 * np.exp(log_y), params)
+    refractory_us = round(params.refractory_s * 1e6)
+    idx = ev["y"].astype(np.int64) * W + ev["x"]
+    order = np.lexsort((ev["t"], idx))
+    same = np.diff(idx[order]) == 0
+    gaps = np.diff(ev["t"][order])[same]
+    assert gaps.size > 100
+    assert gaps.min() >= refractory_us
+    # crossings every 0.3/2000 s = 150 µs can't all be emitted with a 100 µs refractory + 50 µs latency
+    signal = _per_pixel(ev, (H, W), ev["label"] == events.LABEL_SIGNAL)
+    ideal = np.floor(4.0 / maps.threshold_on) * 2 + np.floor(4.0 / maps.threshold_off)
+    assert np.all(signal <= ideal) and signal.sum() < 0.95 * ideal.sum()
+
+
+def test_timestamps_sorted_indexed_and_not_clumped_at_keyframes(tmp_path):
+    H, W = 32, 32
+    params = EventParams(**QUIET)
+    dt_key = 1e-3
+    times = np.arange(0.0, 0.5 + dt_key / 2, dt_key)
+    rng = np.random.default_rng(3)
+    # linear brightening at a different rate per pixel; ≤ 3 % per keyframe interval, so the crossing density
+    # inside an interval (∝ 1/I for linear I) is uniform to ~1 %
+    rates = rng.uniform(5.0, 30.0, (H, W))
+    frames = 1e17 * (1.0 + rates[None] * times[:, None, None])
+    ev, attrs, maps = _run(tmp_path, times, frames, params)
+    t = ev["t"]
+    assert t.size > 3000
+    assert np.all(np.diff(t) >= 0)
+    np.testing.assert_array_equal(ev["ms_to_idx"], np.searchsorted(t, np.arange(ev["ms_to_idx"].size) * 1000))
+    assert ev["ms_to_idx"].size == int(np.ceil(0.5 * 1e3)) + 1
+    fraction = ((t % 1000) + 0.5) / 1000.0  # position inside the keyframe interval (µs resolution)
+    assert stats.kstest(fraction, "uniform").pvalue > 1e-3
+    near_keyframe = np.mean((fraction < 0.02) | (fraction > 0.98))
+    assert near_keyframe < 0.04 + 4 * np.sqrt(0.04 / t.size)
+
+
+def test_dim_pixels_lag_as_the_photoreceptor_cutoff_predicts(tmp_path):
+    """A step ×2 in light: first ON event after −τ·ln(1 − θ/ln 2), τ = 1/(2π f_c(I)) — slow when dim."""
+    params = EventParams(**QUIET)
+    currents = np.array([2e3, 2e4, 2e7])  # e⁻/s before the step (dim, moderate, bright)
+    H, W = 3, 16
+    step_t = 0.01
+    times = np.array([0.0, step_t, step_t + 1e-7, 0.2])
+    level = (currents[:, None] - params.dark_current_e_s) / E_PER_FLUX * np.ones((1, W))
+    frames = np.stack([level, level, 2 * level + params.dark_current_e_s / E_PER_FLUX, 2 * level + params.dark_current_e_s / E_PER_FLUX])
+    ev, attrs, maps = _run(tmp_path, times, frames, params)
+    first = np.full(H * W, np.nan)
+    idx = ev["y"].astype(np.int64) * W + ev["x"]
+    for p in range(H * W):
+        ts = ev["t"][idx == p]
+        first[p] = ts.min() * 1e-6 - step_t if ts.size else np.nan
+    after = np.repeat(2 * currents, W)
+    tau = 1.0 / (2 * np.pi * events.cutoff_hz(after, params))
+    expected = -tau * np.log(1.0 - maps.threshold_on / np.log(2.0))
+    np.testing.assert_allclose(first, expected, rtol=0.03, atol=2e-6)
+    assert np.nanmean(first[:W]) > 100 * np.nanmean(first[-W:])
+
+
+def test_thresholds_never_reach_zero(tmp_path):
+    params = EventParams(threshold_sigma=5.0, **QUIET)
+    maps = events.draw_pixel_maps(params, (64, 64), np.random.default_rng(0))
+    assert maps.threshold_on.min() >= params.threshold_min > 0
+    assert maps.threshold_off.min() >= params.threshold_min
+    times = np.array([0.0, 0.01])
+    ev, attrs, _ = _run(tmp_path, times, 1e17 * np.stack([np.ones((4, 4)), 1.5 * np.ones((4, 4))]), params)
+    assert np.all(np.isfinite(ev["t"]))
+    with pytest.raises(SimSpadError, match="threshold_min"):
+        events.validate_params(dataclasses.replace(params, threshold_min=0.0))
+
+
+def test_same_seed_same_events_whatever_the_chunking(tmp_path):
+    params = EventParams(shot_noise_rate_hz_at_1lux=20.0, hot_pixel_fraction=0.05)
+    rng = np.random.default_rng(1)
+    times = np.linspace(0.0, 0.05, 26)
+    frames = 1e16 * np.exp(rng.normal(0, 0.5, (26, 12, 10)))
+    a, _, _ = _run(tmp_path, times, frames, params, seed=4, name="a.h5")
+    b, _, _ = _run(tmp_path, times, frames, params, seed=4, name="b.h5", chunk_bytes=1)
+    c, _, _ = _run(tmp_path, times, frames, params, seed=5, name="c.h5")
+    for key in ("t", "x", "y", "p", "label"):
+        np.testing.assert_array_equal(a[key], b[key])
+    assert a["t"].size != c["t"].size or not np.array_equal(a["t"], c["t"])

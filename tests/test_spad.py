@@ -1,0 +1,307 @@
+"""SPAD model statistics against analytic values, with confidence bounds (DESIGN §4).
+
+Every statistical check uses a bound of ~4–5 standard errors (false-alarm rate ≲ 1e-4 per check) and, where it
+matters, a companion check that a plausible *wrong* model is rejected by the same bound, so the test can fail.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from simspad.errors import SimSpadError
+from simspad.io.recording import RecordingWriter, open_recording
+from simspad.radiometry import flux_scale
+from simspad.sensors.presets import SpadParams
+from simspad.sensors.spad import (SpadChunker, auto_gate, dcr_map, detection_area_m2, detection_probability,
+                                  estimate_flux, log_flux_variance, n_bins, pack_bits, resolve_gate, simulate_spad,
+                                  unpack_bits)
+from simspad.timeline import Timeline
+
+H, W = 48, 64
+BIN_S = 10.24e-6
+QUIET = dict(afterpulsing_probability=0.0, crosstalk_probability=0.0)
+
+
+def _flat_timeline(flux, t_end=1.0, shape=(H, W)):
+    frames = np.full((2, *shape), flux, np.float32)
+    return Timeline.from_arrays([0.0, t_end], frames)
+
+
+def _counts(chunker: SpadChunker, n: int, width: int, chunk: int = 4096) -> np.ndarray:
+    """Ones per pixel over n bins, unpacking only non-zero bytes (dark data stays cheap)."""
+    total = None
+    for k0 in range(0, n, chunk):
+        packed = chunker.chunk(k0, min(chunk, n - k0))
+        if total is None:
+            total = np.zeros(packed.shape[1:2] + (packed.shape[2] * 8,), np.int64)
+        flat = packed.reshape(packed.shape[0], -1)
+        _, col = np.nonzero(flat)
+        vals = flat[flat != 0]
+        bits = np.unpackbits(vals[:, None], axis=1, bitorder="little").astype(np.int64)
+        per_byte = np.zeros((flat.shape[1], 8), np.int64)
+        np.add.at(per_byte, col, bits)
+        total += per_byte.reshape(packed.shape[1], -1)
+    return total[:, :width]
+
+
+def _chi2_ok(observed, expected_p, n, dof_slack=5.0):
+    """Pearson statistic of binomial counts; returns (statistic, dof, bound)."""
+    var = n * expected_p * (1 - expected_p)
+    stat = float(np.sum((observed - n * expected_p) ** 2 / var))
+    dof = observed.size
+    # Var of each term is 2 + (1 − 6p(1−p))/var: keep the exact spread so small counts do not false-alarm
+    spread = math.sqrt(float(np.sum(2 + (1 - 6 * expected_p * (1 - expected_p)) / var)))
+    return stat, dof, dof + dof_slack * spread
+
+
+# ------------------------------------------------------------------------------------------------- pure functions
+def test_pack_bits_little_order_round_trip():
+    rng = np.random.default_rng(0)
+    bits = (rng.random((5, 3, 13)) < 0.4).astype(np.uint8)
+    packed = pack_bits(bits)
+    assert packed.shape == (5, 3, 2)
+    assert np.array_equal(unpack_bits(packed, 13), bits)
+    one = np.zeros((1, 1, 13), np.uint8)
+    one[0, 0, 9] = 1
+    assert pack_bits(one)[0, 0].tolist() == [0, 0b10]  # x = 9 → byte 1, bit 1 (LSB first)
+
+
+def test_kernel_places_bits_at_their_column():
+    """Only column 11 is lit (no dark counts): every 1 of the packed output must decode to column 11."""
+    frames = np.zeros((2, 4, 21), np.float32)
+    frames[:, 2, 11] = 3e16  # Λ ≈ 3.9 per bin
+    tl = Timeline.from_arrays([0.0, 1.0], frames)
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    out = SpadChunker(tl, 0.0, 500, p, np.zeros((4, 21), np.float32), np.random.default_rng(1)).chunk(0, 500)
+    bits = unpack_bits(out, 21)
+    assert bits[:, 2, 11].sum() > 400 and bits.sum() == bits[:, 2, 11].sum()
+
+
+def test_estimate_flux_inverts_probability_and_clamps():
+    q, gate, dcr = 1e-11, 1e-6, 50.0
+    flux = np.array([1e14, 1e15, 1e16])
+    p = detection_probability(flux, gate, q, dcr)
+    n = 10_000
+    assert np.allclose(estimate_flux(p * n, n, gate, dcr, q), flux, rtol=1e-9)
+    full = estimate_flux(n, n, gate, dcr, q)
+    assert np.isfinite(full) and np.isclose(full, (math.log(n) / gate - dcr) / q)
+    assert np.isclose(log_flux_variance(1.0, 100), (math.e - 1) / 100)
+
+
+def test_auto_gate_solves_the_percentile_and_clips():
+    rate = np.linspace(1e3, 1e6, 1001)
+    g = auto_gate(rate, BIN_S, 5.75e-9, 0.9)
+    assert np.isclose(np.percentile(-np.expm1(-rate * g), 99), 0.9, rtol=1e-9)
+    assert auto_gate(np.full(10, 1.0), BIN_S, 5.75e-9) == BIN_S
+    assert auto_gate(np.full(10, 1e12), BIN_S, 5.75e-9) == 5.75e-9
+    with pytest.raises(SimSpadError, match="gate_s"):
+        resolve_gate(SpadParams(gate_s=1e-9))
+
+
+def test_dcr_map_is_lognormal_with_hot_pixels():
+    p = SpadParams()
+    dcr = dcr_map((400, 400), p, np.random.default_rng(3)).astype(np.float64)
+    n = dcr.size
+    hot = dcr > 150.0  # ln(150/7.5)/0.9 = 3.3σ above ordinary, ln(2000/150)/0.9 = 2.9σ below hot
+    frac = hot.mean()
+    assert abs(frac - p.hot_pixel_fraction) < 5 * math.sqrt(p.hot_pixel_fraction * (1 - p.hot_pixel_fraction) / n)
+    ordinary = np.log(dcr[~hot])
+    # median: SE ≈ 1.2533σ/√n; σ of ln: SE ≈ σ/√(2n); truncation at 3.3σ moves both by < 0.3 %
+    assert abs(np.median(ordinary) - math.log(p.dcr_median_cps)) < 5 * 1.2533 * p.dcr_log_sigma / math.sqrt(n) + 0.01
+    assert abs(ordinary.std() - p.dcr_log_sigma) < 5 * p.dcr_log_sigma / math.sqrt(2 * n) + 0.01 * p.dcr_log_sigma
+
+
+# ------------------------------------------------------------------------------------------------- flat fields
+LUX = [0.1, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5]
+
+
+@pytest.mark.parametrize("lux", LUX)
+def test_flat_field_bit_rate_matches_binomial(lux):
+    """Per-pixel counts ~ Binomial(n, 1 − exp(−(λ + r_dark)·gate)) with the real DCR map, fixed gate."""
+    flux = flux_scale(1.0, lux)  # flat relative luminance 1 = the mean: the whole frame is mid-grey
+    base = SpadParams(**QUIET)
+    q = detection_area_m2(base)
+    rate = flux * q
+    # the full bin where it does not saturate, else a fixed gate giving p ≈ 0.5 (the sensor's own floor)
+    gate = BIN_S if rate * BIN_S < 2.0 else max(math.log(2) / rate, base.min_gate_s)
+    p = dataclasses.replace(base, gate_s=gate)
+    rng = np.random.default_rng(int(lux * 10))
+    dcr = dcr_map((H, W), p, rng)
+    n = 6000
+    counts = _counts(SpadChunker(_flat_timeline(flux), 0.0, n, p, dcr, rng), n, W)
+    expected = detection_probability(flux, gate, q, dcr.astype(np.float64))
+    assert 1e-4 < expected.mean() < 0.99
+    total, mu = counts.sum(), n * expected.sum()
+    assert abs(total - mu) < 4.5 * math.sqrt(float(np.sum(n * expected * (1 - expected))))
+    stat, dof, bound = _chi2_ok(counts, expected, n)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    # the same bound rejects a model 5 % off in flux
+    wrong = detection_probability(1.05 * flux, gate, q, dcr.astype(np.float64))
+    assert abs(total - n * wrong.sum()) > 4.5 * math.sqrt(float(np.sum(n * wrong * (1 - wrong))))
+
+
+@pytest.mark.parametrize("lux", [1.0, 1e3, 1e5])
+def test_auto_gate_flat_field(tmp_path, lux):
+    """``auto``: the chosen gate puts the 99th percentile at P = 0.9; bits follow it; attrs record the gate."""
+    flux = flux_scale(1.0, lux)
+    p = SpadParams(**QUIET)
+    tl = _flat_timeline(flux, t_end=0.03)
+    path = tmp_path / "a.h5"
+    with RecordingWriter(path, {"width": W, "height": H, "duration_s": 0.03, "lux": lux}) as w:
+        attrs = simulate_spad(w, tl, 0.0, 0.03, p, np.random.default_rng(5))
+    with open_recording(path) as rec:
+        gate = rec.spad_attrs["gate_s"]
+        dcr = rec.dcr_cps.astype(np.float64)
+        n = rec.spad_n_bins
+        counts = rec.spad_counts(0, n)
+        assert n == n_bins(0.03, BIN_S, gate) and np.allclose(rec.spad_t_start, np.arange(n) * BIN_S)
+    rate = flux * detection_area_m2(p) + dcr
+    assert attrs["gate_auto"] and gate == attrs["gate_s"]
+    assert np.isclose(gate, auto_gate(rate, BIN_S, p.min_gate_s, 0.9))
+    expected = -np.expm1(-rate * gate)
+    if gate < BIN_S:
+        assert np.isclose(np.percentile(expected, 99), 0.9, rtol=1e-6)
+    stat, dof, bound = _chi2_ok(counts, expected, n)
+    assert dof - (bound - dof) < stat < bound
+
+
+def _gate_integral(knots_t, knots_y, a, b):
+    """Exact ∫_a^b of the piecewise-linear (knots_t, knots_y), independent of the Timeline code."""
+    inner = knots_t[(knots_t > a) & (knots_t < b)]
+    t = np.concatenate([[a], inner, [b]])
+    return np.trapezoid(np.interp(t, knots_t, knots_y), t)
+
+
+def test_time_varying_ramp_integrates_exactly():
+    """Keyframes every 7.3 µs alternate dark and bright, gate 6 µs: most gates straddle knots.
+
+    Per-bin counts over the pixels follow Binomial(N, 1 − exp(−q·∫_gate Φ)) for the exact integral; sampling the
+    flux at the gate's midpoint instead is rejected by the same statistic.
+    """
+    gate, n = 6e-6, 2500
+    knots_t = np.arange(0, n * BIN_S + 20e-6, 7.3e-6)
+    p = SpadParams(gate_s=gate, **QUIET)
+    q = detection_area_m2(p)
+    peak = 0.6 / (q * gate)  # Λ up to ~0.6: both samplers are exercised
+    knots_y = np.where(np.arange(knots_t.size) % 2 == 0, 0.05, 1.0) * peak * np.linspace(0.3, 1.0, knots_t.size)
+    frames = np.broadcast_to(knots_y[:, None, None], (knots_t.size, 16, 24)).astype(np.float32)
+    tl = Timeline.from_arrays(knots_t, frames)
+    knots_y32 = frames[:, 0, 0].astype(np.float64)
+    chunker = SpadChunker(tl, 0.0, n, p, np.zeros((16, 24), np.float32), np.random.default_rng(7))
+    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(500, n - k0)), 24).sum(axis=(1, 2))
+                              for k0 in range(0, n, 500)])
+    starts = np.arange(n) * BIN_S
+    lam = np.array([q * _gate_integral(knots_t, knots_y32, s, s + gate) for s in starts])
+    expected = -np.expm1(-lam)
+    npx = 16 * 24
+    stat, dof, bound = _chi2_ok(per_bin, expected, npx)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    mid = -np.expm1(-q * gate * np.interp(starts + gate / 2, knots_t, knots_y32))
+    assert _chi2_ok(per_bin, mid, npx)[0] > 3 * bound
+
+
+def test_dark_frames_reproduce_dcr_map():
+    """No light: per-pixel counts over 2·10⁵ bins follow the DCR map; hot pixels are found at their rate."""
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    rng = np.random.default_rng(11)
+    dcr = dcr_map((H, W), p, rng)
+    n = 200_000
+    counts = _counts(SpadChunker(_flat_timeline(0.0, t_end=3.0), 0.0, n, p, dcr, rng), n, W, chunk=8192)
+    expected = -np.expm1(-dcr.astype(np.float64) * BIN_S)
+    stat, dof, bound = _chi2_ok(counts, expected, n)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    # a map with the same statistics but other pixels is rejected: the pattern itself is reproduced
+    shuffled = np.random.default_rng(0).permutation(expected.ravel()).reshape(expected.shape)
+    assert _chi2_ok(counts, shuffled, n)[0] > 3 * bound
+    measured_dcr = -np.log1p(-counts / n) / BIN_S
+    hot_frac = (measured_dcr > 150.0).mean()
+    f = p.hot_pixel_fraction
+    assert abs(hot_frac - f) < 5 * math.sqrt(f * (1 - f) / dcr.size) + 0.003
+
+
+# ------------------------------------------------------------------------------------------------- secondaries
+def _bits(p, flux, n, shape=(H, W), seed=0):
+    tl = _flat_timeline(flux, shape=shape)
+    ch = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(seed))
+    return np.concatenate([unpack_bits(ch.chunk(k0, min(1000, n - k0)), shape[1]) for k0 in range(0, n, 1000)])
+
+
+@pytest.mark.parametrize("p_primary", [0.03, 0.3])  # sparse and dense samplers
+def test_afterpulsing_conditional_rate(p_primary):
+    """Excess P(b[k+1] | b[k]=1) − P(b[k+1] | b[k]=0) = (1−p)a / (1 + (1−p)a) (only primaries afterpulse)."""
+    a = 0.05
+    p = SpadParams(gate_s=BIN_S, afterpulsing_probability=a, crosstalk_probability=0.0)
+    flux = -math.log1p(-p_primary) / (detection_area_m2(p) * BIN_S)
+    b = _bits(p, flux, 4000)
+    prev, nxt = b[:-1].ravel(), b[1:].ravel()
+    n1, n0 = prev.sum(), prev.size - prev.sum()
+    r1, r0 = nxt[prev == 1].mean(), nxt[prev == 0].mean()
+    se = math.sqrt(r1 * (1 - r1) / n1 + r0 * (1 - r0) / n0)
+    expected = (1 - p_primary) * a / (1 + (1 - p_primary) * a)
+    assert abs((r1 - r0) - expected) < 4.5 * se, (r1 - r0, expected, se)
+    assert abs(r0 - p_primary) < 4.5 * math.sqrt(p_primary * (1 - p_primary) / n0)
+    assert expected > 10 * se  # the effect is resolved, so a missing afterpulse model fails
+
+
+def _crosstalk_table(p, c):
+    """Exact joint law of two horizontal neighbours (interior) with crosstalk c from primaries of probability p."""
+    o = 1 - (1 - p * c) ** 3  # at least one of a pixel's 3 other neighbours crosstalks into it
+    table = np.zeros((2, 2))
+    for pl in (0, 1):
+        for pr in (0, 1):
+            w = (p if pl else 1 - p) * (p if pr else 1 - p)
+            p_l = 1.0 if pl else 1 - (1 - (c if pr else 0.0)) * (1 - o)
+            p_r = 1.0 if pr else 1 - (1 - (c if pl else 0.0)) * (1 - o)
+            for bl in (0, 1):
+                for br in (0, 1):
+                    table[bl, br] += w * (p_l if bl else 1 - p_l) * (p_r if br else 1 - p_r)
+    return table
+
+
+@pytest.mark.parametrize("p_primary", [0.03, 0.3])
+def test_crosstalk_joint_law_of_neighbours(p_primary):
+    """The 2×2 table of (left, right) bits of interior neighbours matches the exact law (χ², 3 dof)."""
+    c = 0.03
+    p = SpadParams(gate_s=BIN_S, afterpulsing_probability=0.0, crosstalk_probability=c)
+    flux = -math.log1p(-p_primary) / (detection_area_m2(p) * BIN_S)
+    b = _bits(p, flux, 3000, seed=2)
+    left, right = b[:, 1:-1, 1:-2].ravel(), b[:, 1:-1, 2:-1].ravel()
+    observed = np.bincount(left * 2 + right, minlength=4).reshape(2, 2)
+    # use every 3rd column pair to keep cells nearly independent for the χ² (pairs share pixels otherwise)
+    left3, right3 = b[:, 1:-1, 1:-2:3].ravel(), b[:, 1:-1, 2:-1:3].ravel()
+    obs3 = np.bincount(left3 * 2 + right3, minlength=4)
+    exp3 = _crosstalk_table(p_primary, c).ravel() * left3.size
+    chi2 = float(np.sum((obs3 - exp3) ** 2 / exp3))
+    assert chi2 < 25.0, (chi2, obs3, exp3)  # χ²(3): P(> 25) ≈ 1.6e-5
+    no_ct = _crosstalk_table(p_primary, 0.0).ravel() * left3.size
+    assert float(np.sum((obs3 - no_ct) ** 2 / no_ct)) > 100.0
+    # marginal rate: p + (1 − p)(1 − (1 − pc)^4) for interior pixels
+    marginal = observed[1].sum() / observed.sum()
+    expected = p_primary + (1 - p_primary) * (1 - (1 - p_primary * c) ** 4)
+    assert abs(marginal - expected) < 5 * math.sqrt(expected * (1 - expected) / (b.shape[0] * 46 * 10))
+
+
+# ------------------------------------------------------------------------------------------------- estimator
+@pytest.mark.parametrize("x", [0.05, 0.5, 2.0])
+def test_ml_estimator_recovers_flux_within_predicted_std(x):
+    """z = (ln Φ̂ − ln Φ)/sd has mean 0 and variance 1, sd from the DESIGN §4 formula (dark rate included)."""
+    p = SpadParams(gate_s=1e-6, **QUIET)
+    q = detection_area_m2(p)
+    flux = x / (q * p.gate_s)
+    rng = np.random.default_rng(int(x * 100))
+    dcr = dcr_map((H, W), p, rng)
+    n = 3000
+    counts = _counts(SpadChunker(_flat_timeline(flux), 0.0, n, p, dcr, rng), n, W)
+    est = estimate_flux(counts, n, p.gate_s, dcr.astype(np.float64), q)
+    x_tot = x + dcr.astype(np.float64) * p.gate_s
+    # Var(ln Φ̂) = Var(ln ratê)·(rate/λ)² = (e^{x_tot} − 1)/(n·x_tot²)·(x_tot/x)²
+    sd = np.sqrt(log_flux_variance(x_tot, n)) * x_tot / x
+    z = (np.log(est) - math.log(flux)) / sd
+    N = z.size
+    assert abs(z.mean()) < 4.5 / math.sqrt(N) + 0.05  # + O(1/√n) bias of the ML estimator
+    assert abs(z.var() - 1) < 4.5 * math.sqrt(2 / N) + 0.05
+    assert np.all(np.abs(est / flux - 1) < 6 * sd)
