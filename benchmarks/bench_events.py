@@ -5,7 +5,8 @@ low-passes the log photocurrent (v2e's ``eps = dt/τ`` clipped at 1), compares i
 ``floor(Δ/θ)`` events per pixel with timestamps interpolated linearly between the two frames, draws shot
 noise, leak and hot-pixel events as one uniform per pixel per frame, drops events inside the refractory period
 and sorts everything by time at the end. Both run in this process on the same input keyframes (a textured
-scene panning across the sensor, piecewise linear in time), each after a warm-up.
+scene panning 0.5 px per keyframe — the renderer's adaptive keyframe budget — piecewise linear in time), each
+after a warm-up.
 
 Two reference runs are timed:
 
@@ -15,7 +16,7 @@ Two reference runs are timed:
   to be accurate (what v2e's documentation asks for); SimSPAD gets the same accuracy from its exponential
   integrator and adaptive per-pixel steps at keyframe input.
 
-Run: ``python benchmarks/bench_events.py [--size 256] [--keyframes 100] [--rate 1000]``
+Run: ``python benchmarks/bench_events.py [--size 256] [--keyframes 100] [--rate 1000] [--repeat 3]``
 """
 
 from __future__ import annotations
@@ -32,19 +33,21 @@ from simspad.sensors.presets import EventParams
 from simspad.timeline import Timeline
 
 
-def make_timeline(size: int, n_keyframes: int, rate_hz: float, lux: float, seed: int = 0) -> Timeline:
-    """A smooth random texture panning at 2 px per keyframe (plus a slow global flicker), in photons s⁻¹ m⁻²."""
+def make_timeline(size: int, n_keyframes: int, rate_hz: float, lux: float, flow_px: float = 0.5,
+                  seed: int = 0) -> Timeline:
+    """A smooth random texture panning ``flow_px`` pixels per keyframe (the renderer's default adaptive-keyframe
+    budget, ``max_flow_px = 0.5``) with a slow global flicker, in photons s⁻¹ m⁻²."""
     rng = np.random.default_rng(seed)
-    k = np.fft.fftfreq(2 * size)[:, None] ** 2 + np.fft.fftfreq(2 * size)[None, :] ** 2
-    spectrum = (rng.normal(size=k.shape) + 1j * rng.normal(size=k.shape)) / (1e-4 + k) ** 0.8
-    texture = np.real(np.fft.ifft2(spectrum))
-    texture = np.exp(1.5 * (texture - texture.mean()) / texture.std())
+    fy, fx = np.fft.fftfreq(size)[:, None], np.fft.fftfreq(size)[None, :]
+    spectrum = (rng.normal(size=(size, size)) + 1j * rng.normal(size=(size, size))) / (1e-3 + fx**2 + fy**2) ** 0.8
+    spectrum[0, 0] = 0.0
     times = np.arange(n_keyframes) / rate_hz
     frames = np.empty((n_keyframes, size, size), np.float32)
+    std = None
     for i, t in enumerate(times):
-        shift = 2.0 * i
-        x0 = int(shift) % size
-        frames[i] = texture[:size, x0:x0 + size] * (1.0 + 0.2 * math.sin(2 * math.pi * 5.0 * t))
+        texture = np.real(np.fft.ifft2(spectrum * np.exp(-2j * np.pi * fx * flow_px * i)))  # periodic sub-pixel pan
+        std = std or float(texture.std())
+        frames[i] = np.exp(1.5 * texture / std) * (1.0 + 0.2 * math.sin(2 * math.pi * 5.0 * t))
     scale = flux_scale(float(frames[0].mean()), lux)
     return Timeline.from_arrays(times, frames, scale=scale)
 
@@ -128,6 +131,7 @@ def main(argv=None):
     parser.add_argument("--keyframes", type=int, default=100)
     parser.add_argument("--rate", type=float, default=1000.0, help="keyframe rate, Hz")
     parser.add_argument("--lux", type=float, default=1000.0)
+    parser.add_argument("--repeat", type=int, default=3, help="runs per contender; the fastest is reported")
     args = parser.parse_args(argv)
     params = EventParams()
     tl = make_timeline(args.size, args.keyframes, args.rate, args.lux)
@@ -139,13 +143,17 @@ def main(argv=None):
     small = make_timeline(16, 4, args.rate, args.lux)  # warm-up: numba compile / cache load, NumPy first calls
     run_simspad(small, params, args.lux), run_naive(small, params, args.lux)
 
-    n_s, sec_s = run_simspad(tl, params, args.lux)
-    n_k, sec_k, frames_k = run_naive(tl, params, args.lux)
+    def best(fn, *a, **kw):  # the machine is shared: keep the fastest of a few runs for each contender
+        runs = [fn(*a, **kw) for _ in range(args.repeat)]
+        return min(runs, key=lambda r: r[1])
+
+    n_s, sec_s = best(run_simspad, tl, params, args.lux)
+    n_k, sec_k, frames_k = best(run_naive, tl, params, args.lux)
     # the τ/4 run is long: time a slice of the sequence and report rates
     n_slice = max(3, args.keyframes // 10)
     tl_slice = Timeline.from_arrays(tl.times_s[:n_slice], np.stack([tl.keyframe(i) for i in range(n_slice)]))
-    n_f, sec_f, frames_f = run_naive(tl_slice, params, args.lux, substeps=substeps)
-    n_ss, sec_ss = run_simspad(tl_slice, params, args.lux)
+    n_f, sec_f, frames_f = best(run_naive, tl_slice, params, args.lux, substeps=substeps)
+    n_ss, sec_ss = best(run_simspad, tl_slice, params, args.lux)
 
     kf_s = args.keyframes - 1
     print(f"scene: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "

@@ -116,66 +116,103 @@ def part_mini(spec, tmp: Path) -> Path:
     return out
 
 
-def _timed_sensor(render_dir: Path, out: Path, task, kind: str, lux: float) -> tuple[float, Path]:
+def _render(seq, out: Path, resolution, duration_s: float, seed: int = 1):
+    from simspad.render.renderer import render_sequence
+
+    return render_sequence(seq.scene, seq.trajectory, duration_s=duration_s, start_s=seq.start_s,
+                           resolution=resolution, spp=seq.spp, max_flow_px=seq.max_flow_px,
+                           min_rate_hz=seq.min_rate_hz, seed=seed, out_dir=out, progress=False)
+
+
+def _timed_sim(render_dir: Path, out: Path, kinds, params: dict, lux: float, start_s: float, duration_s: float,
+               reps: int = 2) -> tuple[float, Path]:
+    """Best of ``reps`` wall times of a simulation with only ``kinds`` (ground truth always runs)."""
+    from simspad.radiometry import Optics
     from simspad.sensors.simulate import simulate_recording
 
-    sensors = {k: p for k, p in task.sensors if k == kind}
-    t0 = time.perf_counter()
-    simulate_recording(render_dir, out, lux=lux, sensors=sensors, start_s=task.start_s, duration_s=task.duration_s,
-                       seed=task.seed, stream_key=task.stream_key, gt_rate_hz=task.gt_rate_hz, optics=task.optics,
-                       metadata=dict(task.metadata), progress=False)
-    return time.perf_counter() - t0, out
+    best = math.inf
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        simulate_recording(render_dir, out, lux=lux, sensors={k: params[k] for k in kinds}, start_s=start_s,
+                           duration_s=duration_s, seed=1, stream_key=("bench", lux), gt_rate_hz=1000.0,
+                           optics=Optics(), metadata={"created_utc": "2025-01-01T00:00:00Z"}, progress=False)
+        best = min(best, time.perf_counter() - t0)
+    return best, out
 
 
-def part_units(spec, dataset: Path, tmp: Path) -> dict:
+def part_units(spec, tmp: Path) -> dict:
+    """Per-unit costs, measured as *marginal* costs (a fit over two sizes) so fixed overheads (imports, JIT,
+    file creation) do not inflate them."""
     from simspad.io.recording import open_recording
+    from simspad.render.renderer import select_variant
 
-    print("\n[3] per-unit costs (single process)")
-    m = read_manifest(dataset)
-    seqs = {s.name: s for s in spec.sequences}
-    kf_mp_spp, render_s, kf_per_s_px = 0.0, 0.0, []
-    for r in m["renders"]:
-        s = seqs[r["sequence"]]
-        w, h = s.resolution
-        n_kf = r.get("n_keyframes") or 0
-        kf_mp_spp += n_kf * w * h / 1e6 * s.spp
-        render_s += r["timings"].get("render_s", 0.0)
-        kf_per_s_px.append((r["sequence"], n_kf / s.duration_s / w))  # keyframe rate per pixel of width
-    u = {"render_s_per_kf_mp_spp": render_s / kf_mp_spp}
-    print(f"    render      {u['render_s_per_kf_mp_spp']:.4g} s per keyframe·MP·spp "
-          f"({render_s:.1f} s over {kf_mp_spp:.3g} keyframe·MP·spp, incl. scene load and JIT)")
-    u["kf_rate_per_px_width"] = dict(kf_per_s_px)
+    for k, v in job_environment().items():
+        os.environ.setdefault(k, v)
+    variant = select_variant()
+    seq = spec.sequences[0]
+    w0, h0 = seq.resolution
+    print(f"\n[3] per-unit costs (single process, scene {seq.scene}, Mitsuba {variant})")
+    # Render: per-keyframe time at two sizes → time = a + b·(MP·spp) per keyframe.
+    dur = 0.03
+    pts = []
+    for scale in (1, 2):
+        res = (w0 * scale, h0 * scale)
+        summ = _render(seq, tmp / f"render_{scale}", res, dur)
+        pts.append((res[0] * res[1] / 1e6 * seq.spp, summ.render_s / max(summ.n_rendered, 1), summ.n_keyframes,
+                    res[0]))
+        print(f"    render {res[0]}×{res[1]} {seq.spp} spp: {summ.n_keyframes} keyframes in {dur * 1e3:.0f} ms, "
+              f"{summ.render_s / max(summ.n_rendered, 1) * 1e3:.1f} ms per keyframe")
+    (x1, y1, _, _), (x2, y2, n_kf2, w2) = pts
+    b = max((y2 - y1) / (x2 - x1), 0.0)
+    a = max(y1 - b * x1, 0.0)
+    u = {"render_a_s": a, "render_b_s": b, "kf_per_s_per_px_width": n_kf2 / dur / w2}
+    print(f"    render      {a * 1e3:.3g} ms + {b:.4g} s per MP·spp, per keyframe")
 
-    plan = make_plan(spec, "2025-01-01T00:00:00Z")
-    task = plan.recordings[0]
-    render_dir = dataset / task.render_rel_dir
-    w, h = seqs[task.sequence_name].resolution
+    params = {k: s.params for k, s in spec.sensors.items()}
+    rdir = tmp / "render_2"
+    w, h = pts[1][3], pts[1][3] * h0 // w0
     mp = w * h / 1e6
-    # Warm up numba caches / imports once so the timings below are steady-state per-unit costs.
-    _timed_sensor(render_dir, tmp / "warm.h5", task, "spad", task.lux)
-    t, p = _timed_sensor(render_dir, tmp / "spad.h5", task, "spad", task.lux)
-    with open_recording(p) as rec:
-        gbit = rec.spad_n_bins * w * h / 1e9
-        n_gt = len(rec.gt_t) if rec.has("gt") else 0
-    u["spad_s_per_gbit"] = t / gbit
-    print(f"    spad        {u['spad_s_per_gbit']:.4g} s per Gbit     ({t:.2f} s for {gbit * 1e3:.3g} Mbit, incl. gt)")
-    t, p = _timed_sensor(render_dir, tmp / "frames.h5", task, "frames", task.lux)
-    with open_recording(p) as rec:
-        mpf = max(rec.n_frames, 1) * mp
-    u["frames_s_per_mp_frame"] = t / mpf
-    print(f"    frames      {u['frames_s_per_mp_frame']:.4g} s per MP·frame   ({t:.2f} s for {mpf:.3g} MP·frames, incl. gt)")
-    ev_t, ev_n, mp_s = 0.0, 0, 0.0
-    for lux in spec.lux:
-        t, p = _timed_sensor(render_dir, tmp / f"events_{lux:g}.h5", task, "events", lux)
-        with open_recording(p) as rec:
-            ev_n += rec.n_events
-        ev_t += t
-        mp_s += mp * task.duration_s
-    u["events_s_per_mp_s"] = ev_t / mp_s
-    u["events_per_mp_s"] = ev_n / mp_s
-    print(f"    events      {u['events_s_per_mp_s']:.4g} s per MP·s simulated; {ev_t / max(ev_n, 1) * 1e6:.4g} s per "
-          f"Mevent ({ev_n} events over {len(spec.lux)} lux, {ev_n / mp_s / 1e6:.3g} Mev per MP·s)")
-    u["gt_frames_per_s"] = n_gt / task.duration_s if n_gt else spec.evaluation.rate_hz
+    lux = 100.0
+    full, half = dur, dur / 2
+    _timed_sim(rdir, tmp / "warm.h5", list(params), params, lux, seq.start_s, half, reps=1)  # imports, numba
+    t_gt = [_timed_sim(rdir, tmp / "gt.h5", [], params, lux, seq.start_s, d)[0] for d in (half, full)]
+    gt_marg = t_gt[1] - t_gt[0]
+    if "spad" in params:
+        ts = []
+        for d in (half, full):
+            t, p = _timed_sim(rdir, tmp / "spad.h5", ["spad"], params, lux, seq.start_s, d)
+            with open_recording(p) as rec:
+                ts.append((t, rec.spad_n_bins * w * h / 1e9))
+        u["spad_s_per_gbit"] = max((ts[1][0] - ts[0][0]) - gt_marg, 1e-9) / (ts[1][1] - ts[0][1])
+        print(f"    spad        {u['spad_s_per_gbit']:.4g} s per Gbit  ({ts[1][0]:.2f} s for {ts[1][1] * 1e3:.3g} Mbit "
+              "incl. fixed costs)")
+    if "frames" in params:
+        ts = []
+        for d in (half, full):
+            t, p = _timed_sim(rdir, tmp / "frames.h5", ["frames"], params, lux, seq.start_s, d)
+            with open_recording(p) as rec:
+                ts.append((t, rec.n_frames * mp))
+        dn = ts[1][1] - ts[0][1]
+        u["frames_s_per_mp_frame"] = max((ts[1][0] - ts[0][0]) - gt_marg, 1e-9) / dn if dn > 0 else ts[1][0] / max(ts[1][1], mp)
+        print(f"    frames      {u['frames_s_per_mp_frame']:.4g} s per MP·frame")
+    if "events" in params:
+        ev_t, ev_n = [], []
+        for lux_e in spec.lux:
+            row = []
+            for d in (half, full):
+                t, p = _timed_sim(rdir, tmp / "events.h5", ["events"], params, lux_e, seq.start_s, d, reps=1)
+                with open_recording(p) as rec:
+                    row.append((t, rec.n_events))
+            ev_t.append(max(row[1][0] - row[0][0] - gt_marg, 1e-9))
+            ev_n.append(row[1][1])
+        mp_s = mp * (full - half)
+        u["events_s_per_mp_s"] = sum(ev_t) / len(ev_t) / mp_s
+        u["events_per_mp_s"] = sum(ev_n) / len(ev_n) / (mp * full)
+        print(f"    events      {u['events_s_per_mp_s']:.4g} s per MP·s simulated (mean over {len(spec.lux)} lux; "
+              f"{u['events_per_mp_s'] / 1e6:.3g} Mevents per MP·s, {sum(ev_t) / max(sum(ev_n), 1) * 1e6:.3g} s per Mevent)")
+    u["gt_s_per_mp_frame"] = max(gt_marg, 1e-9) / (mp * (full - half) * 1000.0)
+    print(f"    gt          {u['gt_s_per_mp_frame']:.4g} s per MP·frame ({t_gt[1]:.2f} s incl. fixed costs)")
+    u["bench_width"] = w
     return u
 
 
@@ -184,21 +221,19 @@ def part_estimate(u: dict, paper_path: Path, cluster_workers: list[int], cores_p
 
     paper = load_spec(paper_path)
     cores = default_workers()
-    print(f"\n[4] estimate for {paper_path.relative_to(REPO)} ({len(paper.sequences)} sequences × {len(paper.lux)} lux)")
-    mean_kf_rate_px = sum(u["kf_rate_per_px_width"].values()) / len(u["kf_rate_per_px_width"])
+    print(f"\n[4] estimate for {paper_path} ({len(paper.sequences)} sequences × {len(paper.lux)} lux)")
     render_cpu, sim_cpu, sim_each, size = [], 0.0, [], 0
     spad = paper.sensors.get("spad")
     frames = paper.sensors.get("frames")
     for s in paper.sequences:
         w, h = s.resolution
         mp = w * h / 1e6
-        rate_px = u["kf_rate_per_px_width"].get(s.name, mean_kf_rate_px)
-        # Keyframes: flow-limited (image motion scales with width) or the minimum rate, whichever is more.
-        n_kf = max(s.min_rate_hz * s.duration_s, rate_px * w * s.duration_s) + 1
-        render_wall_here = u["render_s_per_kf_mp_spp"] * n_kf * mp * s.spp
+        # Keyframes: flow-limited (image motion in pixels scales with width) or the minimum rate, whichever is more.
+        n_kf = max(s.min_rate_hz * s.duration_s, u["kf_per_s_per_px_width"] * w * s.duration_s) + 1
+        render_wall_here = n_kf * (u["render_a_s"] + u["render_b_s"] * mp * s.spp)
         render_cpu.append(render_wall_here * cores)
         for _ in paper.lux:
-            t = 0.0
+            t = u["gt_s_per_mp_frame"] * mp * s.duration_s * paper.evaluation.rate_hz
             if spad is not None:
                 gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
                 bins = n_bins(s.duration_s, spad.params.bin_s, gate)
@@ -209,26 +244,26 @@ def part_estimate(u: dict, paper_path: Path, cluster_workers: list[int], cores_p
                 t += u["frames_s_per_mp_frame"] * k * mp
                 size += k * w * h * 2
             if "events" in paper.sensors:
-                # per-pixel event rate grows with image-plane speed, i.e. with width at a fixed field of view
-                scale = w / 64
-                t += u["events_s_per_mp_s"] * mp * s.duration_s * scale
+                # the per-pixel event rate grows with image-plane speed, i.e. with width at a fixed field of view
+                scale = w / u["bench_width"]
+                t += u["events_s_per_mp_s"] * mp * s.duration_s
                 size += int(u["events_per_mp_s"] * scale * mp * s.duration_s * 14)
-            size += int(u["gt_frames_per_s"] * s.duration_s) * w * h * 4
+            size += int(paper.evaluation.rate_hz * s.duration_s) * w * h * 4
             sim_each.append(t)
             sim_cpu += t
     n_rec = len(sim_each)
     local_wall = sum(c / cores for c in render_cpu) + sim_cpu / cores
-    print(f"    renders     {sum(render_cpu) / 3600:8.2f} CPU-h  (≈ {mean_kf_rate_px * 512:.0f} keyframes/s at 512 px "
-          f"width, {paper.sequences[0].spp} spp)")
+    print(f"    renders     {sum(render_cpu) / 3600:8.2f} CPU-h  (≈ {u['kf_per_s_per_px_width'] * 512:.0f} keyframes/s "
+          f"at 512 px width, {paper.sequences[0].spp} spp)")
     print(f"    simulations {sim_cpu / 3600:8.2f} CPU-h  ({n_rec} recordings, longest {max(sim_each) / 60:.1f} min)")
-    print(f"    size        {size / GIB:8.1f} GiB (SPAD and frames exact; events and gt from mini rates)")
+    print(f"    size        {size / GIB:8.1f} GiB (SPAD, frames, gt exact; events from the measured rate)")
     print(f"    this machine ({cores} cores): ≈ {local_wall / 3600:.2f} h")
     for n in cluster_workers:
         nodes = max(1, n // cores_per_node)
         waves = math.ceil(len(render_cpu) / nodes)
         render_wall = waves * max(c / cores_per_node for c in render_cpu)
         sim_wall = max(sim_cpu / n, max(sim_each))
-        print(f"    cluster of {n:4d} workers ({nodes} nodes × {cores_per_node} cores, this machine's per-core speed): "
+        print(f"    cluster of {n:4d} workers ({nodes} nodes × {cores_per_node} cores at this machine's per-core speed): "
               f"≈ {(render_wall + sim_wall) / 3600:.2f} h (renders {render_wall / 60:.1f} min, simulations "
               f"{sim_wall / 60:.1f} min)")
 
@@ -238,24 +273,17 @@ def main(argv=None) -> int:
     ap.add_argument("--spec", type=Path, default=REPO / "datasets" / "mini.toml")
     ap.add_argument("--paper", type=Path, default=REPO / "datasets" / "simspad.toml")
     ap.add_argument("--cluster-workers", type=int, nargs="+", default=[16, 64, 256])
-    ap.add_argument("--skip-mini", action="store_true", help="unit costs from a 2×2 subset instead of the mini run")
+    ap.add_argument("--skip-mini", action="store_true", help="skip the full mini dataset run")
     ap.add_argument("--skip-naive", action="store_true")
     args = ap.parse_args(argv)
     spec = load_spec(args.spec)
     with tempfile.TemporaryDirectory(prefix="bench_generate_") as d:
         tmp = Path(d)
+        if not args.skip_mini:
+            part_mini(spec, tmp)      # first, so the driver's peak RSS is the driver's alone
         if not args.skip_naive:
             part_ratio(spec, tmp)
-        if args.skip_mini:
-            sub = _subset(spec, 2, 2)
-            dataset = tmp / "executor"
-            if not (dataset / "manifest.json").exists():
-                generate(sub, dataset, progress=False)
-            units_spec = sub
-        else:
-            dataset = part_mini(spec, tmp)
-            units_spec = spec
-        units = part_units(units_spec, dataset, tmp)
+        units = part_units(spec, tmp)
         part_estimate(units, args.paper, args.cluster_workers)
         shutil.rmtree(tmp, ignore_errors=True)
     return 0

@@ -27,8 +27,9 @@ from typing import Any
 
 from simspad.errors import SimSpadError
 
-#: Environment variables forwarded to workers (set before Mitsuba/Dr.Jit is imported there).
-FORWARDED_ENV = ("DRJIT_LIBLLVM_PATH",)
+#: Environment variables forwarded to workers (set before Mitsuba/Dr.Jit is imported there): the same libLLVM
+#: and variant everywhere, so renders are bit-identical whichever worker runs them.
+FORWARDED_ENV = ("DRJIT_LIBLLVM_PATH", "SIMSPAD_MITSUBA_VARIANT")
 _DEBIAN_LIBLLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 
 
@@ -180,6 +181,12 @@ class LocalExecutor:
 
     def close(self, cancel: bool = False) -> None:
         for pool in (self._render_pool, self._sim_pool):
+            if cancel:
+                # Interrupted: stop the running tasks now (their temporary files are removed by the next run)
+                # instead of waiting for them at interpreter exit. ``_processes`` is the pool's own table.
+                for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                    with contextlib.suppress(Exception):
+                        proc.kill()
             pool.shutdown(wait=not cancel, cancel_futures=cancel)
 
 

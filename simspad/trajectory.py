@@ -25,6 +25,7 @@ Outside its keyframe span a trajectory holds its first / last pose (velocity zer
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import tomllib
@@ -831,11 +832,13 @@ def _to_toml(ts: TrajectorySet) -> str:
 
 
 def _to_csv(ts: TrajectorySet) -> str:
-    lines = [",".join(_CSV_COLUMNS + ("body",))]
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")  # quotes body names that hold commas
+    writer.writerow(_CSV_COLUMNS + ("body",))
     for name, tr in ts.bodies().items():
         for t, p, q in zip(tr.times_s, tr.positions_m, tr.quaternions_xyzw):
-            lines.append(",".join([_f(t), *map(_f, p), *map(_f, q), name]))
-    return "\n".join(lines) + "\n"
+            writer.writerow([_f(t), *map(_f, p), *map(_f, q), name])
+    return buf.getvalue()
 
 
 # --------------------------------------------------------------------------------------------------------------

@@ -119,15 +119,25 @@ def test_rerun_is_a_no_op(tiny):
     assert {p: _stat(out, p) for p in before} == before
 
 
-def test_dask_local_cluster_is_bit_identical(tiny):
+def test_dask_is_bit_identical_to_local(tiny):
+    """Both Dask paths: a LocalCluster started by `generate` (workers=2) and joining a running scheduler by
+    address (as on a cluster). Every recording's sha256 must equal the local executor's."""
+    from distributed import LocalCluster
+
     root, spec_path, out, _ = tiny
-    out_dask = root / "dask"
-    generate(load_spec(spec_path), out_dask, executor="dask", workers=2, progress=False, created_utc=CREATED)
     local = {e["path"]: e["sha256"] for e in read_manifest(out)["recordings"]}
-    dask = {e["path"]: e["sha256"] for e in read_manifest(out_dask)["recordings"]}
-    assert local == dask
-    for rel, sha in dask.items():
-        assert file_sha256(out_dask / rel) == sha
+    generate(load_spec(spec_path), root / "dask", executor="dask", workers=2, progress=False, created_utc=CREATED)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=40) as cluster:
+        generate(load_spec(spec_path), root / "dask_join", executor="dask", scheduler=cluster.scheduler_address,
+                 progress=False, created_utc=CREATED)
+    for name in ("dask", "dask_join"):
+        m = read_manifest(root / name)
+        assert {e["path"]: e["sha256"] for e in m["recordings"]} == local
+        for e in m["recordings"]:
+            assert file_sha256(root / name / e["path"]) == e["sha256"]
+    with pytest.raises(SimSpadError, match="--scheduler"):
+        generate(load_spec(spec_path), root / "bad", executor="local", scheduler="tcp://127.0.0.1:1", progress=False)
 
 
 def test_concurrent_run_is_refused(tiny):

@@ -4,7 +4,6 @@ import html
 import os
 import shutil
 import subprocess
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -116,3 +115,19 @@ def test_leaderboard_renders_in_headless_chromium(evaluated, tmp_path):
     rgb = np.asarray(Image.open(shot).convert("RGB"), np.int32)
     saturated = np.abs(rgb[..., 0] - rgb[..., 2]) > 60  # the plots' coloured lines and markers
     assert saturated.sum() > 500
+
+
+def test_recordings_are_found_with_and_without_a_manifest(evaluated, tmp_path):
+    from simspad.evaluate.evaluate import list_recordings
+
+    root, ds = evaluated
+    entries, manifest = list_recordings(ds)
+    assert [e.rel for e in entries] == ["recordings/ramp/ramp_10lx.h5", "recordings/ramp/ramp_100lx.h5"]
+    assert manifest["spec_hash"] == "x"  # the 'failed' ghost entry was skipped
+    plain = tmp_path / "plain"
+    shutil.copytree(ds / "recordings", plain / "recordings")
+    shutil.copytree(root / "res_ni", plain / "results")  # saved reconstructions must not count as recordings
+    (plain / "recordings" / ".ramp_1lx.h5.tmp-1-abc").write_bytes(b"")
+    entries, manifest = list_recordings(plain)
+    assert manifest is None
+    assert [e.rel for e in entries] == ["recordings/ramp/ramp_100lx.h5", "recordings/ramp/ramp_10lx.h5"]

@@ -41,7 +41,7 @@ def test_converges_to_a_step_with_the_predicted_time_constant():
                            np.zeros(n), None, 8.0, T)
 
     times = np.linspace(0.0, 4 * T - 1e-9, 81)
-    params = AkfParams(sigma_p=0.0)
+    params = AkfParams(sigma_p=0.0, innovation_window_px=0)  # the bare equations
     out = np.stack(list(akf_frames(iter([meas(0, 0.0), meas(1, 0.0), meas(2, 1.0), meas(3, 1.0)]), times, shape,
                                    params, None)))
     L = np.log(out[:, 0, 0].astype(np.float64))
@@ -57,6 +57,15 @@ def test_converges_to_a_step_with_the_predicted_time_constant():
     assert abs((1.0 - L[k]) - 1.0 / (1.0 + (times[k] - 2 * T) / t_half)) < 1e-5
     # After two windows at the new level the error is prior/(prior + gained) = 3/5 of the step, decreasing.
     assert abs((1.0 - L[-1]) - 0.6) < 1e-3 and np.all(np.diff(L[after]) > 0)
+    # Covariance matching: the innovation (1) is far beyond √(P + R), so P is scaled up at the step and the state
+    # follows the new frames at once; ratio = ν²/(P + R) exactly (uniform images).
+    out2 = np.stack(list(akf_frames(iter([meas(0, 0.0), meas(1, 0.0), meas(2, 1.0), meas(3, 1.0)]), times, shape,
+                                    AkfParams(sigma_p=0.0), None)))
+    L2 = np.log(out2[:, 0, 0].astype(np.float64))
+    P_infl = P_step * 1.0 / (P_step + var)
+    k_end = np.searchsorted(times, 3 * T) - 1
+    expected = 1.0 - (1.0 / (1.0 / P_infl + (times[k_end] - 2 * T) / (var * T))) / P_infl
+    assert abs(L2[k_end] - expected) < 1e-5 and 1.0 - L2[k_end] < 0.25
 
 
 def test_event_update_adds_threshold_isolation_and_refractory_noise():
@@ -74,7 +83,7 @@ def test_event_update_adds_threshold_isolation_and_refractory_noise():
     ev_pix = np.array([4, 4], dtype=np.int64)
     ev_dl = np.array([0.3, -0.25])
     sp, siso, sref, win, qthr = 0.005, 0.03, 0.05, 0.010, 0.03 ** 2
-    akf_events(L, P, LF, Rinv, t_upd, t_last, W, H, ev_t, ev_pix, ev_dl, sp, siso, sref, win, qthr)
+    akf_events(L, P, LF, Rinv, t_upd, t_last, W, H, ev_t, ev_pix, ev_dl, sp, siso, sref, win, qthr, 0.0, 0.0, 0.0, 1.0)
     p1 = 0.1 + sp * 0.020 + qthr + siso * (0.020 - 0.010) + sref * (0.020 - 0.015)
     p2 = p1 + sp * 0.025 + qthr + siso * (0.045 - 0.010)  # previous event 25 ms ago: beyond the window
     assert np.isclose(P[4], p2, rtol=1e-12)

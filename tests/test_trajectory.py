@@ -47,7 +47,7 @@ def _world_angular_velocity_fd(tr: Trajectory, t: np.ndarray, h: float) -> np.nd
 @pytest.mark.parametrize("suffix", [".toml", ".json", ".csv", ".txt"])
 def test_round_trip_every_format(tmp_path, suffix):
     camera = _random_trajectory(1)
-    objects = {} if suffix == ".txt" else {"rotor blade": _random_trajectory(2, n=5), "door": _random_trajectory(3)}
+    objects = {} if suffix == ".txt" else {"rotor blade, left": _random_trajectory(2, n=5), "door": _random_trajectory(3)}
     ts = TrajectorySet(camera, objects, "memory")
     path = save_trajectory(ts, tmp_path / f"traj{suffix}")
     back = load_trajectory(path)

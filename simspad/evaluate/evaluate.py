@@ -4,7 +4,8 @@ For each recording × method (a *task*):
 
 1. the evaluation instants are the ``/gt/t`` instants that lie on the evaluation grid t₀ + k/rate_hz
    (default 1 kHz, or the dataset spec's ``evaluation.rate_hz``);
-2. the white point W is the 99th percentile of ground truth over those instants (read in chunks);
+2. the white point W is the 99th percentile of ground truth over those instants (read in chunks, exact, once
+   per recording);
 3. the method reconstructs flux frames at those instants; each frame is scored as it arrives
    (:func:`simspad.evaluate.metrics.frame_scores`: display mapping, log-affine alignment for methods without
    absolute scale, PSNR, SSIM), so memory does not grow with the sequence length;
@@ -191,7 +192,7 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
     frame_rows, psnrs, ssims = [], [], []
     star = is_siemens_star(scene)
     geometry = None
-    mtf_sum = mtf_n = None
+    mtf_freq = mtf_sum = mtf_n = None
     images = None
     method_s = 0.0
     it = iter(frames)
@@ -225,14 +226,20 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
                 geometry = metrics.siemens_star_geometry(gt)
             f, m = metrics.mtf_siemens(shown, gt, geometry=geometry)
             if f.size:
-                mtf_sum = np.nan_to_num(m) if mtf_sum is None else mtf_sum + np.nan_to_num(m)
-                mtf_n = f if mtf_n is None else mtf_n
+                if mtf_sum is None:
+                    mtf_freq, mtf_sum, mtf_n = f, np.zeros_like(m), np.zeros(m.shape, np.int64)
+                ok = np.isfinite(m)
+                mtf_sum[ok] += m[ok]
+                mtf_n[ok] += 1
         if i == image_frame:
             images = (crop(metrics.display_map(shown, white)), crop(metrics.display_map(gt, white)))
         i += 1
     if i != idx.size:
         raise ValueError(f"{i} frames for {idx.size} evaluation instants")
-    mtf = None if mtf_sum is None else (mtf_n, mtf_sum / i)
+    mtf = None
+    if mtf_sum is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mtf = (mtf_freq, np.where(mtf_n > 0, mtf_sum / np.maximum(mtf_n, 1), np.nan))
     return {"frame_rows": frame_rows, "psnr_db": float(np.mean(psnrs)) if psnrs else float("nan"),
             "ssim": float(np.nanmean(ssims)) if ssims and not np.all(np.isnan(ssims)) else float("nan"),
             "n_frames": i, "mtf": mtf, "images": images, "method_s": method_s}
@@ -245,6 +252,8 @@ class Task:
     rate_hz: float
     work_dir: Path
     save_reconstructions: bool = True
+    white: float | None = None
+    """Sequence white point, computed once per recording by the caller (None: computed by the task)."""
 
 
 def _base_row(task: Task, white: float) -> dict:
@@ -297,7 +306,7 @@ def run_task(task: Task) -> dict:
     e = task.entry
     with open_recording(e.path) as rec:
         idx = evaluation_indices(rec.gt_t, task.rate_hz)
-        white = _gt_white_point(rec, idx)
+        white = task.white if task.white is not None else _gt_white_point(rec, idx)
         row = _base_row(task, white)
         out = {"row": row, "frame_rows": [], "mtf_rows": []}
         try:
@@ -335,10 +344,11 @@ def run_task(task: Task) -> dict:
             out["frame_rows"] = res["frame_rows"]
         except Exception as exc:  # a method's failure is a result, not the end of the run
             row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+            (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
         return out
 
 
-def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float) -> None:
+def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float, white: float) -> None:
     """The ground-truth crop of the chosen instant even when every method failed."""
     from simspad.io.recording import open_recording
 
@@ -346,7 +356,6 @@ def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float) -> Non
         idx = evaluation_indices(rec.gt_t, rate_hz)
         if idx.size == 0:
             return
-        white = _gt_white_point(rec, idx)
         gt = rec.gt_flux(int(idx[idx.size // 2]))
     save_png(work_dir / "images" / slug(entry.key) / "gt.png", crop(metrics.display_map(gt, white)))
 
@@ -415,12 +424,15 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         for m in methods:
             get_method(m)  # unknown names are bad input: fail before doing anything
     tasks = []
+    whites = {}
     for e in entries:
         with open_recording(e.path) as rec:
-            if evaluation_indices(rec.gt_t, rate_hz).size == 0:
+            idx = evaluation_indices(rec.gt_t, rate_hz)
+            if idx.size == 0:
                 raise SimSpadError("no ground-truth instants to evaluate", path=e.path, field="/gt/t")
             names = list(methods) if methods else available_methods(rec)
-        tasks.extend(Task(e, m, float(rate_hz), Path(), save_reconstructions) for m in names)
+            whites[e.rel] = _gt_white_point(rec, idx)  # once per recording, shared by its tasks
+        tasks.extend(Task(e, m, float(rate_hz), Path(), save_reconstructions, whites[e.rel]) for m in names)
     if not tasks:
         raise SimSpadError("no method applies to these recordings", path=target, field="--methods")
     with atomic_path(out_dir) as tmp:
@@ -431,7 +443,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         rows = [r["row"] for r in results]
         for e in entries:
             if not (tmp / "images" / slug(e.key) / "gt.png").exists():
-                write_gt_image(tmp, e, rate_hz)
+                write_gt_image(tmp, e, rate_hz, whites[e.rel])
         meta = {"format": "simspad-results", "format_version": 1, "simspad_version": __version__,
                 "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                 "kind": "evaluate", "target": str(target), "rate_hz": rate_hz,
@@ -443,6 +455,11 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         write_results_dir(tmp, rows, [f for r in results for f in r["frame_rows"]],
                           [m for r in results for m in r["mtf_rows"]], meta)
     return out_dir, rows
+
+
+def evaluate_recording(rec_path, methods=None, out_dir=None, rate_hz=None) -> list[dict]:
+    """Evaluate ``methods`` on one recording into the results directory ``out_dir``; return the rows."""
+    return evaluate(Path(rec_path), methods=methods, out_dir=out_dir, rate_hz=rate_hz)[1]
 
 
 def protocol_metadata() -> dict:
@@ -457,12 +474,13 @@ def protocol_metadata() -> dict:
 
 def summary_table(rows: list[dict]) -> str:
     """A short text table of the rows (for the terminal)."""
-    lines = [f"{'method':<20} {'recording':<34} {'PSNR dB':>8} {'SSIM':>6} {'kHz/px':>9}"]
+    lines = [f"{'method':<20} {'recording':<28} {'PSNR dB':>8} {'SSIM':>6} {'kHz/px':>9}"]
     for r in rows:
+        key = recording_key(r["sequence"], r["lux"])[:28]
         if r.get("error"):
-            lines.append(f"{r['method'][:20]:<20} {r['recording'][:34]:<34} FAILED: {r['error'][:80]}")
+            lines.append(f"{r['method'][:20]:<20} {key:<28} FAILED: {r['error'][:80]}")
         else:
-            lines.append(f"{r['method'][:20]:<20} {r['recording'][:34]:<34} {r['psnr_db']:8.2f} {r['ssim']:6.3f} "
+            lines.append(f"{r['method'][:20]:<20} {key:<28} {r['psnr_db']:8.2f} {r['ssim']:6.3f} "
                          f"{r['bandwidth_khz_per_pixel']:9.3f}")
     return "\n".join(lines)
 

@@ -47,6 +47,7 @@ class Board:
     info: dict[str, dict]
     psnr: dict[tuple[str, str, float], float]
     sources: dict[tuple[str, str], Path]
+    mtf50: dict[tuple[str, str, float], float]
 
 
 def load_results(results_dirs) -> list[tuple[dict, Path]]:
@@ -95,6 +96,8 @@ def build_board(results_dirs) -> Board:
         m["psnr"].append(r["psnr_db"])
         m["ssim"].append(r.get("ssim", float("nan")))
     psnr = {k: _mean(v) for k, v in per_cell.items()}
+    mtf = {(r["method"], r["scene"], float(r["lux"])): r.get("mtf50_cyc_px", float("nan")) for r in rows
+           if not r.get("error") and math.isfinite(r.get("mtf50_cyc_px", float("nan")))}
     columns = sorted({(r["scene"], float(r["lux"])) for r in rows})
     for m in info.values():
         m["bw_khz_mean"] = _mean(m["bw_khz"])
@@ -103,7 +106,7 @@ def build_board(results_dirs) -> Board:
         m["ssim_mean"] = _mean(m["ssim"])
     methods = sorted(info, key=lambda k: (-(info[k]["psnr_mean"]) if math.isfinite(info[k]["psnr_mean"])
                                           else math.inf, k))
-    return Board(rows, methods, columns, info, psnr, sources)
+    return Board(rows, methods, columns, info, psnr, sources, mtf)
 
 
 def _best(values: dict[str, float], higher: bool = True) -> set[str]:
@@ -185,6 +188,22 @@ def lux_table(board: Board):
     body = [[(_label(board, m), False)] + [(_f(means[m][l]), m in best[j]) for j, l in enumerate(luxes)]
             for m in board.methods]
     return header, body
+
+
+def mtf_table(board: Board):
+    """MTF50 (cycles/px) of the Siemens-star recordings, or None when there are none."""
+    cols = sorted({(s, l) for _, s, l in board.mtf50})
+    if not cols:
+        return None
+    best = [_best({m: board.mtf50.get((m, s, l), float("nan")) for m in board.methods}) for s, l in cols]
+    header = ["Method"] + [f"{s} @ {l:g} lx" for s, l in cols]
+    body = [[(_label(board, m), False)] + [(_f(board.mtf50.get((m, s, l), float("nan")), 3), m in best[j])
+                                           for j, (s, l) in enumerate(cols)] for m in board.methods]
+    return header, body
+
+
+MTF_NOTE = ("MTF50 in cycles per pixel relative to the ground truth (0.5 = stays above half contrast up to "
+            "Nyquist; – = already below 0.5 at the lowest measured frequency, or no star).")
 
 
 def write_csv_table(path: Path, board: Board) -> None:
@@ -354,7 +373,11 @@ def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, b
              "affine fit in log space (no absolute scale). Bandwidth: mean over recordings.</p>",
              "<h2>Methods × scenes × lux (PSNR, dB)</h2>", _html_table(header, body),
              "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody),
-             "<h2>Plots</h2>"]
+             ]
+    mt = mtf_table(board)
+    if mt is not None:
+        parts += ["<h2>Siemens star: MTF50</h2>", f"<p class=\"note\">{html.escape(MTF_NOTE)}</p>", _html_table(*mt)]
+    parts.append("<h2>Plots</h2>")
     parts.append("<div class=\"plots\">" + "".join(_img_tag(png, name) for name, png in plots.items()) + "</div>")
     if strips:
         parts.append("<h2>Reconstructions at the chosen instant (ground truth first)</h2>")
@@ -375,7 +398,11 @@ def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[
            f"PSNR in dB (DESIGN §8 display mapping). Best per column in bold. {DAGGER}: scored after a per-frame "
            "least-squares affine fit in log space (no absolute scale). Bandwidth: mean over recordings.", "",
            "## Methods × scenes × lux (PSNR, dB)", "", _md_table(header, body), "",
-           "## Mean PSNR per light level (dB)", "", _md_table(lheader, lbody, 1), "", "## Plots", ""]
+           "## Mean PSNR per light level (dB)", "", _md_table(lheader, lbody, 1), ""]
+    mt = mtf_table(board)
+    if mt is not None:
+        out += ["## Siemens star: MTF50", "", _md_escape(MTF_NOTE), "", _md_table(*mt, 1), ""]
+    out += ["## Plots", ""]
     out += [f"![{_md_escape(name)}]({f})" for name, f in plot_files.items()]
     if strip_files:
         out += ["", "## Reconstructions at the chosen instant (ground truth first)", ""]

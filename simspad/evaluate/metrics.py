@@ -18,10 +18,10 @@ PSNR and SSIM come from scikit-image with ``data_range=1`` on the display-mapped
 :data:`PSNR_CAP_DB` (a frame identical to the ground truth would otherwise give +inf and poison the mean).
 
 MTF (Siemens star): along circles of radius r around the star's centre the star is a periodic pattern of
-``n_cycles`` periods, i.e. spatial frequency f = n_cycles / (2π r) cycles per pixel. The modulation at radius r
-is the amplitude of the n_cycles-th angular Fourier harmonic divided by the mean (the Michelson contrast of a
-sinusoid); MTF(f) = modulation(reconstruction) / modulation(ground truth) on the same circle, and MTF50 is the
-lowest frequency where it falls to 0.5.
+``n_cycles`` periods, i.e. spatial frequency f = n_cycles / (2π r) cycles per pixel. On each circle h = F_n/F_0 is
+the n_cycles-th angular Fourier coefficient over the mean (half the Michelson contrast of a sinusoid);
+MTF(f) = Re(h_rec·conj(h_gt))/|h_gt|², the reconstruction's modulation relative to the ground truth's (projected
+on its phase, so noise does not masquerade as contrast). MTF50 is the lowest frequency where it falls to 0.5.
 """
 
 from __future__ import annotations
@@ -33,6 +33,8 @@ import numpy as np
 PSNR_CAP_DB = 100.0
 WHITE_PERCENTILE = 99.0
 LOG_FLOOR_REL = 1e-3
+#: Fewest cycles a Siemens star is assumed to have (lower harmonics are the star's outline, not its spokes).
+MIN_STAR_CYCLES = 8
 
 
 # -- display mapping -------------------------------------------------------------------------------------------
@@ -80,42 +82,49 @@ def white_point(gt_frames: np.ndarray | Callable[[], Iterable[np.ndarray]]) -> f
     return float(w) if w > 0 else 1.0
 
 
-def _order_statistic(chunks: Callable[[], Iterable[np.ndarray]], rank: int, lo: float, hi: float,
-                     max_keep: int = 1 << 22) -> float:
-    """The ``rank``-th smallest value (0-based) among all chunk values, by histogram narrowing.
+def _order_statistics(chunks: Callable[[], Iterable[np.ndarray]], rank: int, lo: float, hi: float,
+                      max_keep: int = 1 << 22) -> tuple[float, float | None]:
+    """The ``rank``-th smallest value (0-based) among all chunk values and, when it is in the same final bin,
+    the next one (else None), by histogram narrowing.
 
-    Each pass counts values below ``lo`` and histograms [lo, hi]; once the bin holding the rank has few enough
-    values, they are collected and sorted. Memory stays at ``max_keep`` values whatever the sequence length.
+    Each pass counts values below ``lo`` and histograms [lo, hi]; once the range holding the rank has few
+    enough values, they are collected and sorted. Memory stays at ``max_keep`` values whatever the length.
     """
-    for _ in range(64):
-        below = 0
-        inside = 0
+    def arrays():
         for c in chunks():
-            c = np.asarray(c, dtype=np.float64).ravel()
+            yield np.asarray(c, dtype=np.float64).ravel()
+
+    for _ in range(64):
+        below = inside = 0
+        for c in arrays():
             below += int(np.count_nonzero(c < lo))
             inside += int(np.count_nonzero((c >= lo) & (c <= hi)))
         if inside <= max_keep or hi <= lo:
-            vals = np.concatenate([c[(c >= lo) & (c <= hi)] for c in
-                                   (np.asarray(x, dtype=np.float64).ravel() for x in chunks())] or [np.empty(0)])
+            vals = np.concatenate([c[(c >= lo) & (c <= hi)] for c in arrays()] or [np.empty(0)])
             vals.sort()
-            return float(vals[rank - below])
+            j = rank - below
+            return float(vals[j]), (float(vals[j + 1]) if j + 1 < vals.size else None)
         edges = np.linspace(lo, hi, 4097)
         hist = np.zeros(4096, np.int64)
-        for c in chunks():
-            c = np.asarray(c, dtype=np.float64).ravel()
+        for c in arrays():
             hist += np.histogram(c[(c >= lo) & (c <= hi)], bins=edges)[0]
-        cum = below + np.cumsum(hist)
-        k = int(np.searchsorted(cum, rank, side="right"))
-        new_lo, new_hi = edges[k], edges[k + 1]
+        k = int(np.searchsorted(below + np.cumsum(hist), rank, side="right"))
+        new_lo = edges[k]
+        # numpy histogram bins are half-open except the last: keep the narrowed range closed and exact
+        new_hi = np.nextafter(edges[k + 1], -np.inf) if k < 4095 else edges[k + 1]
         if new_lo == lo and new_hi == hi:
             break
-        # the top edge of a numpy histogram bin is exclusive except for the last one: nudge to keep it closed
-        lo, hi = new_lo, np.nextafter(new_hi, -np.inf) if k < 4095 else new_hi
-    return float(lo)
+        lo, hi = new_lo, new_hi
+    return float(lo), None
+
+
+def _order_statistic(chunks, rank: int, lo: float, hi: float, max_keep: int = 1 << 22) -> float:
+    """The ``rank``-th smallest value (0-based) among all chunk values (see :func:`_order_statistics`)."""
+    return _order_statistics(chunks, rank, lo, hi, max_keep)[0]
 
 
 def streamed_percentile(chunks: Callable[[], Iterable[np.ndarray]], q: float) -> float:
-    """Exact ``np.percentile(all_values, q)`` (linear interpolation) over chunks read several times."""
+    """Exact ``np.percentile(all_values, q)`` (linear interpolation) over chunks read a few times."""
     n = 0
     lo, hi = np.inf, -np.inf
     for c in chunks():
@@ -127,10 +136,11 @@ def streamed_percentile(chunks: Callable[[], Iterable[np.ndarray]], q: float) ->
         return 0.0
     k = q / 100.0 * (n - 1)
     k0 = int(np.floor(k))
-    v0 = _order_statistic(chunks, k0, lo, hi)
+    v0, v1 = _order_statistics(chunks, k0, lo, hi)
     if k0 + 1 >= n or k == k0:
         return v0
-    v1 = _order_statistic(chunks, k0 + 1, v0, hi)
+    if v1 is None:
+        v1 = _order_statistic(chunks, k0 + 1, v0, hi)
     return v0 + (k - k0) * (v1 - v0)
 
 
@@ -148,20 +158,22 @@ def log_floor_rec(rec: np.ndarray) -> float:
     return LOG_FLOOR_REL * p if p > 0 else 1e-30
 
 
-def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float) -> tuple[float, float]:
+def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float | None = None) -> tuple[float, float]:
     """Least-squares (a, b) of a·ln(rec) + b ≈ ln(gt) over all pixels of one frame.
 
     Parameters
     ----------
     rec, gt : ndarray [H,W]
         Reconstruction (any scale) and ground truth (ph s⁻¹ m⁻²).
-    white : float
-        Sequence white point W; the ground-truth floor is 10⁻³·W.
+    white : float, optional
+        Sequence white point W; the ground-truth floor is 10⁻³·W (default: the frame's own 99th percentile).
 
     Returns
     -------
     (a, b) : floats. A constant reconstruction (zero log-variance) gives a = 0, b = mean(ln gt).
     """
+    if white is None:
+        white = white_point(gt)
     x = _log_floored(rec, log_floor_rec(rec)).ravel()
     y = _log_floored(gt, LOG_FLOOR_REL * white).ravel()
     xm, ym = x.mean(), y.mean()
@@ -231,20 +243,25 @@ def _circle_samples(img: np.ndarray, cy: float, cx: float, r: float, n_samples: 
     return map_coordinates(np.asarray(img, np.float64), coords, order=1, mode="nearest")
 
 
+def _circle_harmonic(img: np.ndarray, cy: float, cx: float, r: float, n_cycles: int) -> complex:
+    """The ``n_cycles``-th angular Fourier coefficient on the circle of radius ``r``, divided by the mean."""
+    n_samples = max(64, int(8 * n_cycles), int(np.ceil(2 * np.pi * r * 2)))
+    f = np.fft.rfft(_circle_samples(img, cy, cx, r, n_samples))
+    return complex(f[n_cycles] / f[0]) if abs(f[0]) > 0 else 0j
+
+
 def circle_modulation(img: np.ndarray, cy: float, cx: float, r: float, n_cycles: int) -> float:
     """Modulation of the ``n_cycles``-th angular harmonic on the circle of radius ``r``: 2|F_n| / F_0."""
-    n_samples = max(64, int(8 * n_cycles), int(np.ceil(2 * np.pi * r * 2)))
-    v = _circle_samples(img, cy, cx, r, n_samples)
-    f = np.fft.rfft(v)
-    mean = abs(f[0])
-    return float(2 * abs(f[n_cycles]) / mean) if mean > 0 else 0.0
+    return 2 * abs(_circle_harmonic(img, cy, cx, r, n_cycles))
 
 
 def siemens_star_geometry(gt: np.ndarray, max_cycles: int = 128) -> tuple[float, float, int, float]:
     """Locate a Siemens star in a ground-truth frame.
 
-    The centre is searched on a grid around the image centre (± 1/8 of the size, 1 px steps after a coarse
-    pass) to maximise the dominant angular harmonic on a mid-radius circle; ``n_cycles`` is that harmonic.
+    The angular spectra on circles of radius 0.45–0.9 R (R = half the smaller image side) are summed; the
+    centre is searched on a grid around the image centre (± R/2: a coarse pass, then 1 px steps) to maximise the
+    dominant harmonic of that sum, and ``n_cycles`` is that harmonic. Outer circles dominate, where the star is
+    best resolved (inner ones alias).
 
     Returns
     -------
@@ -252,27 +269,29 @@ def siemens_star_geometry(gt: np.ndarray, max_cycles: int = 128) -> tuple[float,
     """
     gt = np.asarray(gt, np.float64)
     H, W = gt.shape
-    r_max = 0.45 * min(H, W)
-    r_mid = 0.6 * r_max
+    R = min(H, W) / 2 - 1
+    radii = np.linspace(0.45, 0.9, 6) * R
 
     def best_harmonic(cy, cx):
-        v = _circle_samples(gt, cy, cx, r_mid, 1024)
-        spec = np.abs(np.fft.rfft(v - v.mean()))[1:max_cycles + 1]
-        k = int(np.argmax(spec))
-        return spec[k], k + 1
+        spec = np.zeros(max_cycles + 1)
+        for r in radii:
+            v = _circle_samples(gt, cy, cx, r, 1024)
+            spec += np.abs(np.fft.rfft(v - v.mean()))[:max_cycles + 1] / v.mean() if v.mean() > 0 else 0.0
+        k = MIN_STAR_CYCLES + int(np.argmax(spec[MIN_STAR_CYCLES:]))
+        return spec[k], k
 
-    span = max(2, min(H, W) // 8)
+    span = max(2, int(R // 2))
     best = (-1.0, (H - 1) / 2, (W - 1) / 2, 1)
-    for step, centre in ((max(1, span // 4), None), (1, True)):
-        cy0, cx0 = ((H - 1) / 2, (W - 1) / 2) if centre is None else (best[1], best[2])
-        rng = span if centre is None else max(1, span // 4)
+    coarse = max(1, span // 4)
+    for step, rng, centred in ((coarse, span, True), (1, coarse, False)):
+        cy0, cx0 = ((H - 1) / 2, (W - 1) / 2) if centred else (best[1], best[2])
         for dy in np.arange(-rng, rng + 1, step):
             for dx in np.arange(-rng, rng + 1, step):
                 power, k = best_harmonic(cy0 + dy, cx0 + dx)
                 if power > best[0]:
                     best = (power, cy0 + dy, cx0 + dx, k)
     _, cy, cx, n = best
-    r_max = min(r_max, cy, cx, H - 1 - cy, W - 1 - cx)
+    r_max = min(0.95 * R, cy, cx, H - 1 - cy, W - 1 - cx)
     return float(cy), float(cx), int(n), float(r_max)
 
 
@@ -280,10 +299,14 @@ def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,
                 geometry: tuple[float, float, int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """MTF of a reconstruction of a Siemens star relative to its ground truth.
 
+    On each circle the reconstruction's normalised harmonic is projected on the ground truth's:
+    MTF = Re(h_rec·conj(h_gt)) / |h_gt|² with h = F_n / F_0. Noise then averages out instead of adding
+    modulation, and a phase lag (motion blur, latency) lowers the MTF as it should.
+
     Parameters
     ----------
     rec, gt : ndarray [H,W]
-        Reconstruction and ground truth (linear; any common scale: modulation is scale-free).
+        Reconstruction and ground truth (linear; any common scale: the measure is scale-free).
     n_radii : int
         Circles sampled between the Nyquist radius (f = 0.5 cycles/px) and the star's edge.
     geometry : (cy, cx, n_cycles, r_max), optional
@@ -291,18 +314,20 @@ def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,
 
     Returns
     -------
-    freq_cyc_px, mtf : ndarrays sorted by increasing frequency.
+    freq_cyc_px, mtf : ndarrays sorted by increasing frequency; NaN on circles where the ground truth shows
+    less than 10 % of its strongest modulation (outside the star).
     """
     cy, cx, n, r_max = geometry or siemens_star_geometry(gt)
     r_min = max(n / np.pi, 2.0)  # f = n / (2π r) = 0.5 cycles/px
     if r_max <= r_min:
         return np.empty(0), np.empty(0)
     radii = np.geomspace(r_min, r_max, n_radii)
-    m_gt = np.array([circle_modulation(gt, cy, cx, r, n) for r in radii])
-    m_rec = np.array([circle_modulation(rec, cy, cx, r, n) for r in radii])
+    h_gt = np.array([_circle_harmonic(gt, cy, cx, r, n) for r in radii])
+    h_rec = np.array([_circle_harmonic(rec, cy, cx, r, n) for r in radii])
+    keep = np.abs(h_gt) > 0.1 * np.abs(h_gt).max() if np.abs(h_gt).max() > 0 else np.zeros(radii.size, bool)
     freq = n / (2 * np.pi * radii)
     with np.errstate(divide="ignore", invalid="ignore"):
-        mtf = np.where(m_gt > 1e-6, m_rec / m_gt, np.nan)
+        mtf = np.where(keep, (h_rec * np.conj(h_gt)).real / np.abs(h_gt) ** 2, np.nan)
     order = np.argsort(freq)
     return freq[order], mtf[order]
 

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from simspad import __version__
-from simspad.errors import InputError, SimSpadError
+from simspad.errors import InputError
 from simspad.evaluate import metrics
 from simspad.evaluate.evaluate import (RecordingEntry, _gt_white_point, evaluation_indices, fill_entry,
                                        list_recordings, protocol_metadata, score_frames, write_images,
                                        DEFAULT_RATE_HZ, _spec_evaluation)
-from simspad.evaluate.results import check_output_dir, slug, write_results_dir
+from simspad.evaluate.results import check_output_dir, write_results_dir
 from simspad.io.atomic import atomic_path
 
 FORMAT = "simspad-submission"
@@ -271,6 +271,9 @@ def score_from_cli(submission, dataset_dir, out_dir=None) -> Path:
 
     out, rows = score(submission, dataset_dir, out_dir)
     click.echo(summary_table(rows))
-    meta_missing = len({r["recording"] for r in rows})
-    click.echo(f"scored {meta_missing} recording(s); wrote {out / 'results.csv'}")
+    import json
+
+    missing = json.loads((out / "results.json").read_text(encoding="utf-8")).get("missing_recordings", [])
+    click.echo(f"scored {len(rows)} recording(s)" + (f"; {len(missing)} of the dataset not in the submission"
+                                                    if missing else "") + f"; wrote {out / 'results.csv'}")
     return out

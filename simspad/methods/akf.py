@@ -9,7 +9,13 @@ At an event, L += ±c and P += Q_thr + Q_iso + Q_ref with
 - Q_thr = threshold_sigma²: the contrast-threshold mismatch (the paper's σ_θ), from the ``/events`` attrs;
 - Q_iso = σ_iso·(time since the last event in the 3×3 neighbourhood, the pixel excluded): isolated events
   are likely noise (Wang et al.);
-- Q_ref = σ_ref·Δt_pixel when the pixel's previous event is less than ``refractory_window_s`` ago (bursts).
+- Q_ref = σ_ref·Δt_pixel when the pixel's previous event is less than ``refractory_window_s`` ago (bursts);
+- Q_bw = (c·τ/(τ + Δt_pixel))²: the illumination-dependent term of the reference paper ("noise dependence on
+  illumination"). The event pixel's photoreceptor is a low-pass with cutoff f_c = f_max·I/(I + I_ref) in its
+  photocurrent I = Φ·qe·fill·pitch² + dark (from the ``/events`` attrs, Φ from the filter state), τ = 1/(2πf_c);
+  a change crossing the threshold Δt after the previous event is reported short by ≈ τ/(τ + Δt) of a step, so
+  dim pixels (slow photoreceptors) make events unreliable and the filter leans on the SPAD frames. Left out when
+  the attrs do not describe the photoreceptor.
 
 Frames. A measurement (:class:`simspad.methods.windows.Measurement`: a NEDI-deblurred SPAD aggregate or an
 EDI-deblurred conventional frame) gives ln Φ(f) with variance ``var_log`` from the sensor response. While it
@@ -44,6 +50,14 @@ class AkfParams:
     sigma_ref: float = 0.05
     refractory_window_s: float = 10e-3
     q_threshold: float = 0.03 ** 2
+    innovation_window_px: int = 3
+    """Covariance matching at each frame over this square window (0 disables); see :func:`inflate_by_innovation`."""
+    max_inflation: float = 1e3
+    pr_area_m2: float = 0.0
+    """Event pixel ``qe·fill_factor·pixel_pitch_m²``: photo-electrons per (ph m⁻²); 0 disables Q_bw."""
+    pr_dark_e_s: float = 0.0
+    pr_cutoff_hz_max: float = 0.0
+    pr_cutoff_ref_e_s: float = 1.0
 
 
 class AkfState:
@@ -65,7 +79,8 @@ class AkfState:
         if len(t_s):
             akf_events(self.L, self.P, self.LF, self.Rinv, self.t_upd, self.t_last_ev, self.width, self.height,
                        t_s, pix, dl, params.sigma_p, params.sigma_iso, params.sigma_ref,
-                       params.refractory_window_s, params.q_threshold)
+                       params.refractory_window_s, params.q_threshold, params.pr_area_m2, params.pr_dark_e_s,
+                       params.pr_cutoff_hz_max, params.pr_cutoff_ref_e_s)
             self.n_events += len(t_s)
 
     def advance(self, t_s: float, sigma_p: float, mask: np.ndarray | None = None) -> None:
@@ -91,9 +106,9 @@ class AkfState:
         return np.exp(self.L).reshape(self.height, self.width).astype(np.float32)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, boundscheck=False)
 def akf_events(L, P, LF, Rinv, t_upd, t_last_ev, width, height, ev_t, ev_pix, ev_dl, sigma_p, sigma_iso,
-               sigma_ref, refr_window, q_thr):
+               sigma_ref, refr_window, q_thr, pr_area, pr_dark, pr_fmax, pr_iref):
     """Per-event AKF update: relax the pixel to the event time, then apply the event and its noise."""
     for e in range(ev_t.size):
         i = ev_pix[e]
@@ -127,17 +142,46 @@ def akf_events(L, P, LF, Rinv, t_upd, t_last_ev, width, height, ev_t, ev_pix, ev
         dtp = t - t_last_ev[i]
         if dtp < refr_window:
             q += sigma_ref * dtp
+        if pr_fmax > 0.0:
+            # photoreceptor bandwidth: an event lags/attenuates the true change by ≈ τ/(τ + Δt) of its step
+            cur = np.exp(L[i]) * pr_area + pr_dark
+            tau = (cur + pr_iref) / (2.0 * np.pi * pr_fmax * cur)
+            frac = tau / (tau + dtp)
+            q += (ev_dl[e] * frac) ** 2
         P[i] += q
         t_last_ev[i] = t
+
+
+def inflate_by_innovation(st: AkfState, lf: np.ndarray, var: np.ndarray, mask, window_px: int,
+                          max_inflation: float) -> None:
+    """Covariance matching at a new frame: scale P up where the innovations exceed what P + R explains.
+
+    The innovation ν = L^F(a) − L(a) has variance P + var under the filter's model. Events that never fired
+    (a photoreceptor too slow for the motion, a change below threshold) leave no trace in Q, so the filter would
+    keep trusting a stale state; pooled over a ``window_px`` square (to average out the χ² noise of single
+    pixels), ``r = mean ν² / mean(P + var)`` > 1 reveals it and P is multiplied by r (never decreased). This is
+    the classic covariance-matching adaptation (Mehra 1972) applied once per frame.
+    """
+    from scipy.ndimage import uniform_filter
+
+    shape = (st.height, st.width)
+    nu2 = (lf - st.L) ** 2
+    ratio = uniform_filter(nu2.reshape(shape), window_px, mode="nearest") / uniform_filter(
+        (st.P + var).reshape(shape), window_px, mode="nearest")
+    ratio = np.clip(ratio.reshape(-1), 1.0, max_inflation)
+    if mask is None:
+        st.P *= ratio
+    else:
+        st.P[mask] *= ratio[mask]
 
 
 def akf_frames(measurements: Iterable[Measurement], times_s: np.ndarray, shape: tuple[int, int],
                params: AkfParams, tally, adaptive=None) -> Iterator[np.ndarray]:
     """Run the filter over a measurement stream and yield exp(L) at each requested instant.
 
-    ``adaptive`` (optional) is an object with ``select(state, m) -> bool mask [N] or None`` deciding which
-    pixels take the new measurement and ``after(state, m, mask)``; it charges the tally itself. Without it
-    every measurement is used and charged in full.
+    ``adaptive`` (optional) is an object with ``select(state, m, first) -> (mask [N] bool, measurement)``
+    deciding which pixels take a measurement (and possibly re-aggregating it) and ``after(state, m, mask)``; it
+    charges the tally itself. Without it every measurement is used and charged in full.
     """
     H, W = shape
     it = iter(measurements)
@@ -154,12 +198,15 @@ def akf_frames(measurements: Iterable[Measurement], times_s: np.ndarray, shape: 
     while m is not None:
         mask = None
         if adaptive is not None:
-            mask = adaptive.select(st, m, first)
+            mask, m = adaptive.select(st, m, first)
         elif tally is not None:
             tally.add(1.0, m.readout_bits)
         var = m.var_log if first else m.var_log_predicted(np.exp(st.L + m.level_ref))
         rinv = 1.0 / (var * m.duration_s)
-        st.set_measurement(m.log_flux_at_start(), rinv, mask)
+        lf = m.log_flux_at_start()
+        if not first and params.innovation_window_px > 0:
+            inflate_by_innovation(st, lf, var, mask, params.innovation_window_px, params.max_inflation)
+        st.set_measurement(lf, rinv, mask)
         if adaptive is not None:
             st.Rinv[~mask] = 0.0  # no new frame there: the state integrates events only
         first = False
@@ -194,6 +241,14 @@ def akf_params_for(rec, **overrides) -> AkfParams:
 
     _, _, sigma = event_thresholds(rec)
     values = {"q_threshold": sigma ** 2}
+    a = rec.events_attrs
+    try:
+        values.update(pr_area_m2=float(a["qe"]) * float(a.get("fill_factor", 1.0)) * float(a["pixel_pitch_m"]) ** 2,
+                      pr_dark_e_s=float(a.get("dark_current_e_s", 0.0)),
+                      pr_cutoff_hz_max=float(a["photoreceptor_cutoff_hz_max"]),
+                      pr_cutoff_ref_e_s=float(a["photoreceptor_cutoff_ref_rate_e_s"]))
+    except (KeyError, TypeError, ValueError):
+        pass  # no photoreceptor description (e.g. a converted real capture): Q_bw is left out
     values.update(overrides)
     return AkfParams(**values)
 

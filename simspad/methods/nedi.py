@@ -230,7 +230,8 @@ def spad_measurements(rec, n_bins: int, *, use_events: bool, until_s: float, tal
         if events is not None:
             tally.add(len(events) / n_pix, 32.0 * len(events) / n_pix)
         yield Measurement(a, b, f, phi.reshape(-1), floor_flux(n_bins, resp.q_m2, resp.gate_s), var.reshape(-1),
-                          lref.reshape(-1), events, float(bits), b_nominal - a, var_model)
+                          lref.reshape(-1), events, float(bits), b_nominal - a, var_model,
+                          raw_counts=counts.reshape(-1), raw_bin_t=bin_t)
 
 
 class NEDI(Method):

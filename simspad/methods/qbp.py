@@ -11,8 +11,8 @@ For every output instant a burst of raw binary frames centred there is processed
    levels, tiles of ``tile_px``), sub-pixel refinement by a parabola through the L2 costs and Lucas–Kanade
    iterations per tile; the tile flow is interpolated bilinearly to a dense field;
 4. warp (``scipy.ndimage.map_coordinates``, bilinear) and robust merge: per pixel the warped block is pulled
-   towards the reference by the Wiener shrinkage ``A = D²/(D² + c·σ²)`` of the local mean difference D against
-   its binomial noise σ² (the pixel-domain form of the QBP temporal Wiener merge), then summed;
+   towards the reference by a Wiener-like shrinkage of the local mismatch energy in excess of the binomial noise
+   (:func:`robust_merge`; the pixel-domain counterpart of the QBP temporal Wiener merge), then summed;
 5. inverse response: ``Φ̂ = (−ln(1 − S/n)/gate − r_dark)/q`` on the merged count S of n bins (absolute scale).
 
 Simplifications (documented gaps): flow is estimated and applied per block (constant within a block, no
@@ -209,19 +209,23 @@ def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smo
     return flow_y, flow_x
 
 
-def robust_merge(ref: np.ndarray, warped: list[np.ndarray], block_bins: int, c: float = 8.0,
+def robust_merge(ref: np.ndarray, warped: list[np.ndarray], block_bins: int, c: float = 1.0,
                  window_px: int = 5) -> np.ndarray:
     """Sum of the reference and the warped blocks, each pulled towards the reference where it disagrees.
 
-    ``A = D²/(D² + c·σ²)``, D the ``window_px`` box mean of (block − ref), σ² its binomial variance.
+    Per pixel, ``M`` is the ``window_px`` box mean of (block − ref)² and σ² its binomial expectation when the
+    two agree; the excess ``E = max(M − σ², 0)`` is mismatch the noise cannot explain (misalignment, occlusion,
+    aliasing of fine periodic texture that a box mean of the signed difference would average away), and the
+    Wiener-like shrinkage ``A = E/(E + c·σ²)`` replaces the block by the reference in proportion.
     """
     p_ref = np.clip(ref / block_bins, 0.0, 1.0)
     total = ref.astype(np.float64).copy()
     for w in warped:
         p = np.clip(w / block_bins, 0.0, 1.0)
-        var = block_bins * (p * (1 - p) + p_ref * (1 - p_ref)) / window_px ** 2 + 1.0 / window_px ** 2
-        d = ndimage.uniform_filter(w - ref, window_px, mode="nearest")
-        a = d * d / (d * d + c * var)
+        var = ndimage.uniform_filter(block_bins * (p * (1 - p) + p_ref * (1 - p_ref)), window_px, mode="nearest")
+        m = ndimage.uniform_filter((w - ref) ** 2, window_px, mode="nearest")
+        excess = np.maximum(m - var, 0.0)
+        a = excess / (excess + c * var + 1e-12)
         total += w + a * (ref - w)
     return total
 

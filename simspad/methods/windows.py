@@ -30,7 +30,7 @@ class Measurement:
         The reference instant f the image refers to (s).
     flux_ref : ndarray [N] float64
         Φ(f), photon irradiance (ph s⁻¹ m⁻²), flattened; may be 0.
-    floor_flux : float
+    floor_flux : float or ndarray [N]
         The log-domain floor of this measurement (irradiance of a half count / electron).
     var_log : ndarray [N] float64
         Var(ln Φ̂(f)) from the sensor response.
@@ -53,13 +53,16 @@ class Measurement:
     b_s: float
     t_ref_s: float
     flux_ref: np.ndarray
-    floor_flux: float
+    floor_flux: float | np.ndarray
     var_log: np.ndarray
     level_ref: np.ndarray
     events: EventBatch | None
     readout_bits: float
     duration_s: float
     var_log_model: Callable[[np.ndarray], np.ndarray] | None = None
+    raw_counts: np.ndarray | None = None
+    """SPAD windows only: the ones per pixel [N] and the bins' sampling instants, for re-aggregation."""
+    raw_bin_t: np.ndarray | None = None
 
     def var_log_predicted(self, flux_pred: np.ndarray) -> np.ndarray:
         """Var(ln Φ̂) at the predicted irradiance, keeping the measurement's own structure (events in the window)

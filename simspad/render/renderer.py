@@ -31,7 +31,14 @@ from simspad.timeline import TIMELINE_FILE, write_timeline_json
 __all__ = ["RenderSummary", "render_sequence", "select_variant"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
-RENDERER_VERSION = 1
+RENDERER_VERSION = 2
+
+
+def sampler_for(spp: int) -> str:
+    """Low-discrepancy samples when ``spp`` is a power of two (≈ 4x lower noise than independent ones at 64 spp,
+    and with a fixed seed the pattern stays put as the image moves, so interpolated keyframes track brute-force
+    renders closely); independent samples otherwise (the low-discrepancy sampler would round ``spp`` up)."""
+    return "ldsampler" if spp & (spp - 1) == 0 else "independent"
 #: Depth pass: samples per pixel and the scene-depth percentile that bounds image motion from camera translation.
 DEPTH_SPP = 1
 NEAR_DEPTH_PERCENTILE = 2.0
@@ -228,7 +235,7 @@ class _MitsubaScene:
             "to_world": mi.ScalarTransform4f(self.rest_camera_to_world),
             "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
                      "component_format": "float32", "rfilter": {"type": "box"}},
-            "sampler": {"type": "independent", "sample_count": spp},
+            "sampler": {"type": sampler_for(spp), "sample_count": spp},
         })
         self.sensor_params = mi.traverse(self.sensor)
         self.depth_integrator = mi.load_dict({"type": "aov", "aovs": "dd.y:depth"})
@@ -431,7 +438,7 @@ def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float
 
     base_key = {"renderer": RENDERER_VERSION, "mitsuba": mi.__version__, "variant": variant,
                 "scene": content_hash(info), "trajectory": traj_hash, "width": width, "height": height, "spp": spp,
-                "seed": seed, "depth_spp": DEPTH_SPP}
+                "seed": seed, "depth_spp": DEPTH_SPP, "sampler": sampler_for(spp)}
     names = [f"frames/{i:06d}-{_frame_key(base_key, t)}.exr" for i, t in enumerate(times)]
 
     counter.take()  # kernels of loading and depth probes belong to no frame
@@ -463,7 +470,7 @@ def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float
         scene=info.name, scene_hash=base_key["scene"], trajectory=traj_source, trajectory_hash=traj_hash,
         start_s=t0, duration_s=float(duration_s),
         renderer={"name": "mitsuba", "mitsuba_version": mi.__version__, "variant": variant, "spp": spp,
-                  "seed": seed, "depth_spp": DEPTH_SPP, "depth": "Z: distance along the optical axis, m (inf: no hit)",
+                  "seed": seed, "sampler": sampler_for(spp), "depth_spp": DEPTH_SPP, "depth": "Z: distance along the optical axis, m (inf: no hit)",
                   "max_flow_px": max_flow_px, "min_rate_hz": min_rate_hz, "near_depth_m": near_depth_m,
                   "focal_px": ms.focal_px, "x_fov_deg": ms.x_fov_deg, "camera_id": info.camera_id,
                   "simspad_renderer_version": RENDERER_VERSION},

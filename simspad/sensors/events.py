@@ -33,8 +33,8 @@ Per pixel (flattened index ``y·W + x``):
   crossing that falls in that window fires when the window ends (if the change still exceeds the threshold).
 
 Randomness: one splitmix64 stream per pixel, seeded from the sensor's ``rng``, so the result does not depend on
-chunking. Events stream out in time chunks, sorted by (time, pixel); events read out after the recording's end
-are dropped.
+chunking. Events stream out in time chunks, sorted by (µs timestamp, pixel index) with a two-pass counting
+sort; events read out after the recording's end are dropped.
 
 File layout (DESIGN §5): ``/events/t`` int64 µs since the timeline's t = 0 (``time_origin_s = 0``; the same
 base as ``/gt/t``), ``x``, ``y`` uint16, ``p`` uint8 (1 ON, 0 OFF), ``label`` uint8, and ``ms_to_idx[k]`` = index
@@ -60,6 +60,8 @@ LABEL_NAMES = {LABEL_SIGNAL: "signal", LABEL_SHOT: "shot_noise", LABEL_LEAK: "le
 _FIELD = "sensors.events"
 #: Bytes of keyframe photocurrent held per time chunk (bounds memory whatever the sequence length).
 CHUNK_BYTES = 64 << 20
+#: Keyframe pieces per time chunk at most (keeps each chunk's event buffers small and cache-friendly).
+CHUNK_PIECES = 16
 #: Events written per HDF5 chunk.
 EVENT_CHUNK_ROWS = 1 << 16
 #: Extra blind time after the refractory period, so µs-floored timestamps keep ≥ refractory_s spacing.
@@ -132,6 +134,8 @@ def shot_noise_rate_hz(photocurrent, current_1lux: float, params: EventParams) -
 
 _MIN_CURRENT = 1e-6  # e⁻/s: keeps ln I finite if a user sets the dark current to 0
 _MIN_STEP_S = 1e-10  # s: the internal step never shrinks below this (guards against round-off stalls)
+_ROOT_TOL_S = 1e-9  # s: crossing instants are solved to this (timestamps are whole µs) ...
+_ROOT_TOL_LOG = 1e-9  # ... or until the detector is this close to the threshold (log units)
 
 
 def validate_params(params: EventParams) -> None:
@@ -189,6 +193,74 @@ def _normal(state):
 
 
 @numba.njit(cache=True)
+def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level):
+    """Root of D(x) = level on [lo, hi] where D = a_off + b_slope·x + c·exp(−x/τ) is monotone.
+
+    ``f_lo``, ``f_hi`` are D − level at the ends (opposite signs, or zero). Once the photoreceptor transient
+    ``c·exp(−x/τ)`` has decayed below the tolerance D is linear and the root is closed-form; otherwise Newton
+    steps, kept inside the shrinking bracket (bisection when a step leaves it).
+    """
+    if f_lo == 0.0:
+        return lo
+    if f_hi == 0.0:
+        return hi
+    e_lo = math.exp(-lo / tau)
+    if abs(c * e_lo) <= _ROOT_TOL_LOG:
+        return min(max(lo - f_lo / b_slope, lo), hi)
+    x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+    for _ in range(100):
+        if not (lo < x < hi):
+            x = 0.5 * (lo + hi)
+        e = c * math.exp(-x / tau)
+        f_x = a_off + b_slope * x + e - level
+        if abs(f_x) <= _ROOT_TOL_LOG or hi - lo < _ROOT_TOL_S:
+            return x
+        if (f_x > 0.0) == (f_lo > 0.0):
+            lo, f_lo = x, f_x
+        else:
+            hi = x
+        slope = b_slope - e / tau
+        x = x - f_x / slope if slope != 0.0 else 0.5 * (lo + hi)
+    return x
+
+
+@numba.njit(cache=True)
+def _first_crossing(a_off, b_slope, c, tau, x0, h, d0, dh, theta_on, theta_off):
+    """First x in (x0, h] where D(x) = a_off + b_slope·x + c·exp(−x/τ) reaches θ_on or −θ_off.
+
+    D has at most one stationary point (D' = b_slope − (c/τ)·exp(−x/τ) is monotone), so [x0, h] splits into at
+    most two monotone pieces; the first piece whose far end is beyond a threshold holds the crossing.
+    Returns ``(x, polarity)`` or ``(-1, 0)``; requires −θ_off < D(x0) < θ_on.
+    """
+    xs = -1.0
+    if c != 0.0 and b_slope != 0.0:
+        r = b_slope * tau / c
+        if r > 0.0:
+            x_stat = -tau * math.log(r)
+            if x0 < x_stat < h:
+                xs = x_stat
+    lo, f_lo = x0, d0
+    for piece in range(2):
+        if piece == 0 and xs > 0.0:
+            hi = xs
+            f_hi = a_off + b_slope * xs + b_slope * tau  # c·exp(−xs/τ) = b_slope·τ there
+        elif piece == 0:
+            hi, f_hi = h, dh
+        elif xs > 0.0:
+            hi, f_hi = h, dh
+        else:
+            break
+        if f_hi >= theta_on:
+            return _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo - theta_on, f_hi - theta_on,
+                                   theta_on), 1
+        if f_hi <= -theta_off:
+            return _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo + theta_off, f_hi + theta_off,
+                                   -theta_off), 0
+        lo, f_lo = hi, f_hi
+    return -1.0, 0
+
+
+@numba.njit(cache=True)
 def _init_state(current0, rng_state, lp, ref, t_ref, t_avail, hz_shot, hz_hot, t0):
     for p in range(current0.size):
         lp[p] = math.log(max(current0[p], _MIN_CURRENT))
@@ -202,38 +274,20 @@ def _init_state(current0, rng_state, lp, ref, t_ref, t_avail, hz_shot, hz_hot, t
 
 
 @numba.njit(cache=True)
-def _grow(buf_t, buf_p, buf_pol, buf_lab):
-    n = buf_t.size * 2
-    t2 = np.empty(n, np.float64)
-    p2 = np.empty(n, np.int64)
-    pol2 = np.empty(n, np.uint8)
-    lab2 = np.empty(n, np.uint8)
-    t2[: buf_t.size] = buf_t
-    p2[: buf_t.size] = buf_p
-    pol2[: buf_t.size] = buf_pol
-    lab2[: buf_t.size] = buf_lab
-    return t2, p2, pol2, lab2
+def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef, shot_exp,
+                f_max, i_ref, step_tol, latency, jitter, refractory,
+                lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
+                buf_t, buf_p, buf_pol, buf_lab, start, limit):
+    """Advance pixels ``p0 … p1−1`` over the keyframe pieces of one chunk, writing their events (unsorted) into
+    the buffers from index ``start``; returns the index after the last event, or −1 if ``limit`` was reached.
 
-
-@numba.njit(cache=True)
-def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef, shot_exp,
-                    f_max, i_ref, step_tol, latency, jitter, refractory,
-                    lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
-                    cap):
-    """Advance every pixel over the keyframe pieces of one chunk; return the events it emits (unsorted).
-
-    ``knot_current[j, p]`` is pixel p's photocurrent at ``knot_t[j]``; between knots it is linear in time.
-    The state arrays are updated in place.
+    ``knot_current[p, j]`` is pixel p's photocurrent at ``knot_t[j]`` (pixel-major, so each pixel's knots are
+    contiguous in memory); between knots it is linear in time. The state arrays are updated in place.
     """
     n_knots = knot_t.size
-    n_pix = knot_current.shape[1]
-    buf_t = np.empty(cap, np.float64)
-    buf_p = np.empty(cap, np.int64)
-    buf_pol = np.empty(cap, np.uint8)
-    buf_lab = np.empty(cap, np.uint8)
-    n_ev = 0
+    n_ev = start
     inv_two_pi_fmax = 1.0 / (_TWO_PI * f_max)
-    for p in range(n_pix):
+    for p in range(p0, p1):
         theta_on = th_on[p]
         theta_off = th_off[p]
         rho = leak_hz[p] * theta_on
@@ -253,23 +307,18 @@ def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_c
             seg = tb - ta
             if seg <= 0.0:
                 continue
-            ia = max(knot_current[j, p], _MIN_CURRENT)
-            ib = max(knot_current[j + 1, p], _MIN_CURRENT)
+            ia = max(knot_current[p, j], _MIN_CURRENT)
+            ib = max(knot_current[p, j + 1], _MIN_CURRENT)
             slope = (ib - ia) / seg
             t = ta
             i_t = ia
             l_t = math.log(i_t)
             while t < tb:
-                # internal step: the linear interpolation of lp inside the step must stay within tol of its
-                # exact path. Two curvatures: ln of the linear input (chord error (Δ ln I)²/8) and the
-                # photoreceptor's transient c·exp(−s/τ) about steady tracking (chord error |c|·(h/τ)²/8).
+                # internal step: inside a step ln I is taken as linear in time; the chord error of ln of the
+                # linear input, (Δ ln I)²/8, must stay within tol (this also bounds how much τ(I) varies)
                 h = tb - t
                 if slope != 0.0:
                     h = min(h, max_dlog * i_t / abs(slope))
-                tau = (i_t + i_ref) * inv_two_pi_fmax / i_t
-                transient = abs(lp - l_t + slope / i_t * tau)
-                if transient > tol:
-                    h = min(h, tau * math.sqrt(8.0 * tol / transient))
                 h = max(h, _MIN_STEP_S)
                 s_b = t + h
                 if s_b >= tb or tb - s_b < 1e-12 * seg:
@@ -287,9 +336,11 @@ def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_c
                 r_shot = 0.0
                 if shot_coef > 0.0:
                     r_shot = shot_coef * math.exp(-shot_exp * 0.5 * (l_t + l_e))
-                # ---- events inside [t, s_b]; lp is linear between (t, lp) and (s_b, lp_e)
+                # ---- events inside [t, s_b]. Exact path, x = s − t:  lp(x) = l_t + k·x − k·τ + c·exp(−x/τ);
+                # detector D(x) = lp(x) − ref + ρ·(s − t_ref) = A + B·x + c·exp(−x/τ)
+                c = lp - l_t + k * tau
+                b_slope = k + rho
                 cur = t
-                dlp = (lp_e - lp) / h
                 while True:
                     if cur < t_avail:
                         s_end = min(t_avail, s_b)
@@ -305,21 +356,34 @@ def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_c
                         cur = s_end
                         if cur >= s_b:
                             break
-                    lp_cur = lp + dlp * (cur - t)
-                    d_cur = lp_cur - ref + rho * (cur - t_ref)
-                    d_end = lp_e - ref + rho * (s_b - t_ref)
+                    x0 = cur - t
+                    a_off = l_t - k * tau - ref + rho * (t - t_ref)
+                    d_cur = a_off + b_slope * x0 + (c if x0 == 0.0 else c * math.exp(-x0 / tau))
+                    d_end = a_off + b_slope * h + c * decay
                     t_sig = np.inf
+                    d_sig = d_cur  # detector value at the signal event: lp there = ref + d_sig − ρ·(t − t_ref)
                     pol = 0
                     if d_cur >= theta_on:
                         t_sig = cur
                         pol = 1
                     elif d_cur <= -theta_off:
                         t_sig = cur
-                    elif d_end >= theta_on:
-                        t_sig = cur + (s_b - cur) * (theta_on - d_cur) / (d_end - d_cur)
-                        pol = 1
-                    elif d_end <= -theta_off:
-                        t_sig = cur + (s_b - cur) * (-theta_off - d_cur) / (d_end - d_cur)
+                    else:
+                        # cheap bounds of D on [x0, h] (convex if c > 0, concave if c < 0) before any search
+                        lin_hi = a_off + b_slope * max(x0, h) if b_slope > 0 else a_off + b_slope * x0
+                        lin_lo = a_off + b_slope * x0 if b_slope > 0 else a_off + b_slope * h
+                        if c >= 0.0:
+                            upper = max(d_cur, d_end)
+                            lower = lin_lo + c * decay
+                        else:
+                            upper = lin_hi + c * decay
+                            lower = min(d_cur, d_end)
+                        if upper >= theta_on or lower <= -theta_off:
+                            x_sig, pol = _first_crossing(a_off, b_slope, c, tau, x0, h, d_cur, d_end,
+                                                         theta_on, theta_off)
+                            if x_sig >= 0.0:
+                                t_sig = t + x_sig
+                                d_sig = theta_on if pol == 1 else -theta_off
                     t_shot = cur + hz_shot / r_shot if r_shot > 0.0 else np.inf
                     t_hot = cur + hz_hot / r_hot if r_hot > 0.0 else np.inf
                     t_next = min(t_sig, min(t_shot, t_hot))
@@ -334,7 +398,7 @@ def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_c
                     hz_hot -= r_hot * dt
                     cur = t_next
                     if t_next == t_sig:
-                        lp_now = lp + dlp * (cur - t)
+                        lp_now = ref + d_sig - rho * (cur - t_ref)
                         label = 0
                         if pol == 1 and rho * (cur - t_ref) > lp_now - ref:
                             label = 2
@@ -358,8 +422,8 @@ def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_c
                         delay += jitter * z
                     t_out = cur + max(delay, 0.0)
                     t_avail = t_out + refractory
-                    if n_ev == buf_t.size:
-                        buf_t, buf_p, buf_pol, buf_lab = _grow(buf_t, buf_p, buf_pol, buf_lab)
+                    if n_ev == limit:
+                        return -1
                     buf_t[n_ev] = t_out
                     buf_p[n_ev] = p
                     buf_pol[n_ev] = pol
@@ -376,7 +440,94 @@ def _simulate_chunk(knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_c
         hzs_state[p] = hz_shot
         hzh_state[p] = hz_hot
         rng_state[p] = rs
-    return buf_t[:n_ev], buf_p[:n_ev], buf_pol[:n_ev], buf_lab[:n_ev]
+    return n_ev
+
+
+@numba.njit(cache=True, parallel=True)
+def _simulate_blocks(n_blocks, block_cap, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef,
+                     shot_exp, f_max, i_ref, step_tol, latency, jitter, refractory,
+                     lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state):
+    """Run pixel blocks in parallel, each into its own slice of shared buffers (``block_cap`` events each).
+
+    Returns the buffers and each block's end index (−1: the block overflowed its slice).
+    """
+    n_pix = knot_current.shape[0]
+    buf_t = np.empty(n_blocks * block_cap, np.float64)
+    buf_p = np.empty(n_blocks * block_cap, np.int64)
+    buf_pol = np.empty(n_blocks * block_cap, np.uint8)
+    buf_lab = np.empty(n_blocks * block_cap, np.uint8)
+    ends = np.empty(n_blocks, np.int64)
+    for b in numba.prange(n_blocks):
+        p0 = b * n_pix // n_blocks
+        p1 = (b + 1) * n_pix // n_blocks
+        ends[b] = _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef, shot_exp,
+                              f_max, i_ref, step_tol, latency, jitter, refractory,
+                              lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
+                              buf_t, buf_p, buf_pol, buf_lab, b * block_cap, (b + 1) * block_cap)
+    return buf_t, buf_p, buf_pol, buf_lab, ends
+
+
+@numba.njit(cache=True)
+def _gather(n_blocks, block_cap, ends, buf_t, buf_p, buf_pol, buf_lab):
+    """Concatenate the blocks' events in block (= pixel) order."""
+    n = 0
+    for b in range(n_blocks):
+        n += ends[b] - b * block_cap
+    t = np.empty(n, np.float64)
+    pix = np.empty(n, np.int64)
+    pol = np.empty(n, np.uint8)
+    lab = np.empty(n, np.uint8)
+    k = 0
+    for b in range(n_blocks):
+        for i in range(b * block_cap, ends[b]):
+            t[k] = buf_t[i]
+            pix[k] = buf_p[i]
+            pol[k] = buf_pol[i]
+            lab[k] = buf_lab[i]
+            k += 1
+    return t, pix, pol, lab
+
+
+@numba.njit(cache=True)
+def _radix_order(t_us, pixel, n_pix, t_lo, span):
+    """Permutation sorting events by (t_us, pixel): two stable counting sorts (pixel, then µs bucket)."""
+    n = t_us.size
+    count = np.zeros(n_pix + 1, np.int64)
+    for i in range(n):
+        count[pixel[i] + 1] += 1
+    for j in range(n_pix):
+        count[j + 1] += count[j]
+    by_pixel = np.empty(n, np.int64)
+    for i in range(n):
+        by_pixel[count[pixel[i]]] = i
+        count[pixel[i]] += 1
+    count = np.zeros(span + 1, np.int64)
+    for i in range(n):
+        count[t_us[i] - t_lo + 1] += 1
+    for j in range(span):
+        count[j + 1] += count[j]
+    order = np.empty(n, np.int64)
+    for i in by_pixel:
+        b = t_us[i] - t_lo
+        order[count[b]] = i
+        count[b] += 1
+    return order
+
+
+def sort_events(t_us: np.ndarray, pixel: np.ndarray, n_pix: int) -> np.ndarray:
+    """Permutation that orders events by (µs timestamp, pixel index): the file's canonical order."""
+    if t_us.size == 0:
+        return np.zeros(0, np.int64)
+    t_lo, t_hi = int(t_us.min()), int(t_us.max())
+    span = t_hi - t_lo + 1
+    if span <= 4 * t_us.size + (1 << 20):
+        return _radix_order(t_us, pixel, int(n_pix), t_lo, span)
+    return np.lexsort((pixel, t_us))
+
+
+def timestamps_us(t_s: np.ndarray) -> np.ndarray:
+    """Integer µs timestamps (floor: the µs during which the event was read out)."""
+    return np.floor(np.asarray(t_s) * 1e6).astype(np.int64)
 
 
 # ----------------------------------------------------------------------------------------------- simulator
@@ -412,7 +563,8 @@ class EventSimulator:
         self.rng_state = maps.rng_state.copy()
         _init_state(np.ascontiguousarray(current0, dtype=np.float64).ravel(), self.rng_state, self.lp, self.ref,
                     self.t_ref, self.t_avail, self.hz_shot, self.hz_hot, float(t0))
-        self._pending = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.uint8))
+        self._pending = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.uint8),
+                         np.empty(0, np.uint8))
         self._cap = 1 << 16
 
     def advance(self, knot_t: np.ndarray, knot_current: np.ndarray):
@@ -420,40 +572,58 @@ class EventSimulator:
 
         Returns
         -------
-        t_s, pixel, polarity, label : ndarray
-            Events read out before ``knot_t[-1]``, sorted by (time, pixel); later ones are held back until
-            they can be merged with the next chunk.
+        t_s, t_us, pixel, polarity, label : ndarray
+            Events whose µs timestamp lies before the µs holding ``knot_t[-1]``, sorted by (t_us, pixel);
+            later ones are held back and merged with the next chunk, so the order does not depend on chunking.
         """
-        p = self.params
-        m = self.maps
-        out = _simulate_chunk(np.ascontiguousarray(knot_t, dtype=np.float64),
-                              np.ascontiguousarray(knot_current, dtype=np.float64),
-                              m.threshold_on, m.threshold_off, m.leak_rate_hz, m.hot_rate_hz,
-                              float(self.shot_coef), float(p.shot_noise_current_exponent),
-                              float(p.photoreceptor_cutoff_hz_max), float(p.photoreceptor_cutoff_ref_rate_e_s),
-                              float(p.substep_tolerance), float(p.latency_s), float(p.jitter_s),
-                              float(p.refractory_s) + _REFRACTORY_GUARD_S,
-                              self.lp, self.ref, self.t_ref, self.t_avail, self.hz_shot, self.hz_hot,
-                              self.rng_state, self._cap)
-        self._cap = max(self._cap, 1 << max(0, int(out[0].size).bit_length()))
-        merged = tuple(np.concatenate([a, b]) for a, b in zip(self._pending, out))
-        order = np.lexsort((merged[1], merged[0]))
+        t_s, pixel, pol, label = self._run_chunk(np.ascontiguousarray(knot_t, dtype=np.float64),
+                                                 np.ascontiguousarray(np.asarray(knot_current, np.float64).T))
+        new = (t_s, timestamps_us(t_s), pixel, pol, label)
+        merged = tuple(np.concatenate([a, b]) for a, b in zip(self._pending, new))
+        order = sort_events(merged[1], merged[2], self.shape[0] * self.shape[1])
         merged = tuple(a[order] for a in merged)
-        cut = int(np.searchsorted(merged[0], knot_t[-1], side="left"))
+        cut = int(np.searchsorted(merged[1], timestamps_us(knot_t[-1]), side="left"))
         self._pending = tuple(a[cut:] for a in merged)
         return tuple(a[:cut] for a in merged)
 
+    def _run_chunk(self, knot_t, knot_current):
+        """All pixels over one chunk, in parallel pixel blocks; retried with more room if a block overflows
+        (the state is restored first, and per-pixel random streams make the retry identical)."""
+        p = self.params
+        m = self.maps
+        n_pix = knot_current.shape[0]
+        n_blocks = max(1, min(n_pix, 4 * numba.get_num_threads(), -(-n_pix // 256)))
+        state = (self.lp, self.ref, self.t_ref, self.t_avail, self.hz_shot, self.hz_hot, self.rng_state)
+        while True:
+            saved = [a.copy() for a in state]
+            block_cap = max(1024, 2 * self._cap // n_blocks)
+            buf_t, buf_p, buf_pol, buf_lab, ends = _simulate_blocks(
+                n_blocks, block_cap, knot_t, knot_current, m.threshold_on, m.threshold_off, m.leak_rate_hz,
+                m.hot_rate_hz, float(self.shot_coef), float(p.shot_noise_current_exponent),
+                float(p.photoreceptor_cutoff_hz_max), float(p.photoreceptor_cutoff_ref_rate_e_s),
+                float(p.substep_tolerance), float(p.latency_s), float(p.jitter_s),
+                float(p.refractory_s) + _REFRACTORY_GUARD_S, *state)
+            if np.all(ends >= 0):
+                break
+            for a, b in zip(state, saved):
+                a[...] = b
+            self._cap *= 4
+        used = ends - np.arange(n_blocks) * block_cap
+        self._cap = max(1024, int(used.max()) * n_blocks)
+        return _gather(n_blocks, block_cap, ends, buf_t, buf_p, buf_pol, buf_lab)
+
     def finish(self):
-        """The events still held back (read out at or after the last instant advanced to)."""
+        """The events still held back (sorted)."""
         pending = self._pending
         self._pending = tuple(a[:0] for a in pending)
         return pending
 
 
-def iter_knot_chunks(flux_tl, t0: float, t1: float, params: EventParams, max_bytes: int = CHUNK_BYTES):
+def iter_knot_chunks(flux_tl, t0: float, t1: float, params: EventParams, max_bytes: int = CHUNK_BYTES,
+                     max_pieces: int = CHUNK_PIECES):
     """Yield ``(knot_t [m+1], photocurrent [m+1, H·W])`` covering [t0, t1] in chunks of whole keyframe pieces."""
     n_pix = flux_tl.width * flux_tl.height
-    per_chunk = max(1, min(1024, max_bytes // (8 * n_pix) - 1))
+    per_chunk = max(1, min(max_pieces, max_bytes // (8 * n_pix) - 1))
     times, values = [], []
     for ta, tb, ya, yb in flux_tl.segments(t0, t1):
         if not times:
@@ -510,13 +680,12 @@ def simulate_events(writer, flux_tl, t0: float, t1: float, params: EventParams, 
     counts = np.zeros(4, dtype=np.int64)
 
     def write(batch):
-        t_s, pixel, pol, label = batch
+        t_s, t_us, pixel, pol, label = batch
         keep = t_s < t1
         if not keep.all():
-            t_s, pixel, pol, label = t_s[keep], pixel[keep], pol[keep], label[keep]
-        if t_s.size == 0:
+            t_us, pixel, pol, label = t_us[keep], pixel[keep], pol[keep], label[keep]
+        if t_us.size == 0:
             return
-        t_us = np.floor(t_s * 1e6).astype(np.int64)
         ms_to_idx[:] += np.searchsorted(t_us, boundaries_us, side="left").astype(np.uint64)
         columns["t"].append(t_us)
         columns["x"].append((pixel % width).astype(np.uint16))

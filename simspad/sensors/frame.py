@@ -157,6 +157,8 @@ def validate_params(params: FrameParams, height: int) -> None:
     for name, ok, message in checks:
         if not ok:
             raise SimSpadError(f"{message}, got {getattr(params, name)!r}", field=f"{_FIELD}.{name}")
+    if params.exposure_s != "auto":
+        resolve_exposure(params, np.zeros((1, 1)))  # a fixed exposure must be > 0 and fit in the frame period
     readout_s = (height - 1) * params.rolling_shutter_line_s
     if readout_s >= 1.0 / params.frame_rate_hz:
         raise SimSpadError(f"rolling-shutter readout {readout_s!r} s ({height} rows) exceeds the frame period",

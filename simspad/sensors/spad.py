@@ -19,24 +19,28 @@ Secondary effects, drawn from each *primary* detection (second-order cascades, �
 - crosstalk: the detection triggers each of the 4 neighbours in the same bin with probability
   ``crosstalk_probability`` (a trial towards a neighbour outside the array is lost).
 
-Dead time (``dead_time_s``, ≈ 100 ns) does not enter the gated 1-bit model: the first detection in a gate sets
-the bit and later detections in the same gate cannot change it, and the pixel is recharged between gates
-(``bin_s − gate_s`` ≥ the dead time at the SwissSPAD2's frame rate, or the next gate is simply blocked for a few
-ns, which only shortens a gate of ≥ 10 µs by < 1 %). It is recorded in the attrs for free-running analyses.
+Dead time (``dead_time_s``, ≈ 100 ns) does not change the bit in gated 1-bit mode: the first detection in a
+gate sets the bit, and detections the dead time hides would only have set it again. The one residual effect —
+a detection in the last ``dead_time_s`` of gate k blinding the start of gate k+1 when ``bin_s − gate_s`` is
+shorter than the dead time — removes at most ``dead_time_s/gate_s`` of that gate (≤ 1 % for the 10 µs gates
+where it can happen) and is neglected. The value is recorded in the attrs for free-running analyses.
 
 Efficiency
 ----------
-Drawing one uniform number per pixel per bin costs the same whatever the light level. Here each pixel's run of
-bins inside one linear piece is simulated by whichever is cheaper for that pixel (both are exact):
+Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
+are simulated per output byte (8 pixels) by whichever sampler is cheaper (both are exact):
 
-- *sparse*: with ``p_max`` the pixel's largest probability over the run, draw geometric skip distances between
-  candidate bins (one exponential variate per candidate, the skip is ``⌊E/Λ_max⌋``) and keep a candidate with
-  probability ``p_k/p_max`` (thinning). Work ∝ detections, so dark scenes cost almost nothing;
-- *dense*: one uniform per bin compared with ``1 − z_k``, ``z_k = exp(−Λ_k)`` updated by one multiplication per
-  bin (Λ is affine in ``k``), which beats a NumPy uniform-per-pixel comparison at any flux.
+- *sparse* (byte's largest probability bound below :data:`SPARSE_MAX_PROBABILITY`): for each pixel, with
+  ``Λ_max`` the largest Λ over the chunk (the flux is piecewise linear, so its maximum sits on a keyframe),
+  draw geometric skips between candidate bins (``⌊E/Λ_max⌋`` with E exponential: one draw per candidate) and
+  keep a candidate with probability ``p_k/p_max`` (thinning, with a squeeze on the lower bound). Work is
+  proportional to detections, so dark scenes cost almost nothing;
+- *dense*: bin by bin, one uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
+  multiplication per bin inside a linear piece (Λ is affine in k there); the byte is assembled in a register.
 
-The random stream is a SplitMix64 generator inside the numba kernel, seeded per run from the caller's
-``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for the same seed.
+The random stream is a SplitMix64 generator inside the numba kernel, seeded per kernel call from the caller's
+``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for the same seed and chunking
+(the chunk size is a function of the frame size only).
 """
 
 from __future__ import annotations
@@ -53,9 +57,11 @@ from simspad.sensors.presets import SpadParams, params_to_attrs
 #: Per-pixel choice between the sparse (skip) and dense (uniform per bin) samplers: sparse below this p_max.
 SPARSE_MAX_PROBABILITY = 0.08
 #: Target size of one streamed chunk of packed bits (bytes); bounds memory whatever the duration.
-CHUNK_BYTES = 4 << 20
+CHUNK_BYTES = 16 << 20
 MIN_CHUNK_BINS = 64
 MAX_CHUNK_BINS = 8192
+#: Keyframes one kernel call may span (bounds the images held per call whatever the keyframe rate).
+MAX_KEYFRAMES_PER_CALL = 16
 _FIELD = "sensors.spad"
 
 
@@ -220,17 +226,27 @@ _S27 = np.uint64(27)
 _S31 = np.uint64(31)
 _S11 = np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0
+_S32 = np.uint64(32)
+_M32 = np.uint64(0xFFFFFFFF)
+_INV32 = 1.0 / 4294967296.0
+_POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
 _DENSE_BLOCK = 128
 
 
 @numba.njit(inline="always")
-def _next_uniform(state):
-    """SplitMix64 step: (new state, uniform in [0, 1))."""
+def _next_u64(state):
+    """SplitMix64 step: (new state, 64 random bits)."""
     state = state + _GOLDEN
     z = state
     z = (z ^ (z >> _S30)) * _MIX1
     z = (z ^ (z >> _S27)) * _MIX2
-    z = z ^ (z >> _S31)
+    return state, z ^ (z >> _S31)
+
+
+@numba.njit(inline="always")
+def _next_uniform(state):
+    """(new state, uniform in [0, 1) with 53-bit resolution)."""
+    state, z = _next_u64(state)
     return state, float(z >> _S11) * _INV53
 
 
@@ -238,7 +254,7 @@ def _next_uniform(state):
 def _geometric(state, log1m_p):
     """Failures before the next success of Bernoulli trials with log(1 − p) = ``log1m_p`` (< 0)."""
     state, u = _next_uniform(state)
-    g = math.log1p(-u) / log1m_p
+    g = math.log(1.0 - u) / log1m_p  # 1 − u is exact and > 0; log is ~3× cheaper than log1p
     if g > 4.0e18:
         g = 4.0e18
     return state, np.int64(g)
@@ -326,6 +342,7 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
         state, ap_left = _geometric(state, log1m_ap)
     if log1m_ct < 0.0:
         state, ct_left = _geometric(state, log1m_ct)
+    lam_dense = -math.log1p(-sparse_max_p)
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
     dense_y = np.empty(H * Wb, np.int64)
@@ -348,7 +365,7 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
                 lam_hi[bit] = q_gate * hi + dark
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
                 hi_byte = max(hi_byte, lam_hi[bit])
-            if -math.expm1(-hi_byte) >= sparse_max_p:
+            if hi_byte >= lam_dense:
                 dense_y[n_dense] = y
                 dense_b[n_dense] = xb
                 n_dense += 1
@@ -359,14 +376,15 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
                     continue
                 x = 8 * xb + bit
                 dark = float(dcr[y, x]) * gate_s
-                p_max = -math.expm1(-lam_max)
-                p_min = -math.expm1(-lam_lo[bit])
-                varying = p_min < p_max
+                varying = lam_lo[bit] < lam_max
+                p_max = -math.expm1(-lam_max) if varying else 1.0
+                p_min = -math.expm1(-lam_lo[bit]) if varying else 1.0
                 mask = np.uint8(1 << bit)
+                inv_lam = 1.0 / lam_max
                 k = np.int64(-1)
                 while True:
                     state, u = _next_uniform(state)
-                    skip = -math.log1p(-u) / lam_max
+                    skip = -math.log(1.0 - u) * inv_lam
                     if skip >= m - 1 - k:
                         break
                     k += 1 + np.int64(skip)
@@ -396,17 +414,21 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
                         slope = q_gate * (float(run_b[r, y, x]) - float(run_a[r, y, x])) * run_dw[r]
                         ratio[i - b0, bit] = math.exp(-slope)
             for i in range(b0, b1):
+                ii = i - b0
                 value = np.int64(0)
-                count = np.int64(0)
-                for bit in range(8):
-                    state, u = _next_uniform(state)
-                    zz = z[i - b0, bit]
-                    z[i - b0, bit] = min(zz * ratio[i - b0, bit], 1.0)
+                for bit in range(0, 8, 2):
+                    # two 32-bit uniforms per draw: p ≥ SPARSE_MAX_PROBABILITY here, so 2⁻³² resolution is ample
+                    state, w = _next_u64(state)
+                    u0 = float(w & _M32) * _INV32
+                    u1 = float(w >> _S32) * _INV32
+                    z0 = z[ii, bit]
+                    z1 = z[ii, bit + 1]
+                    z[ii, bit] = z0 * ratio[ii, bit]
+                    z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
                     # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
-                    d = np.int64(u >= zz)
-                    value |= d << bit
-                    count += d
+                    value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
                 out[k, dense_y[i], dense_b[i]] |= np.uint8(value)
+                count = np.int64(_POPCOUNT8[value])
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
                     for bit in range(8):
                         if (value >> bit) & 1:
@@ -485,11 +507,18 @@ class SpadChunker:
             out = np.zeros(shape, np.uint8)
         else:
             out.fill(0)
-        events = np.empty((1024, 3), np.int64)
-        run_a, run_b, run_dw, bin_run, bin_w = self._layout(k0, m)
-        seed = int(self.rng.integers(0, 2**63))
-        events, n_events = _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, self.dcr, self.q_gate, self.gate_s,
-                                       seed, SPARSE_MAX_PROBABILITY, self.log1m_ap, self.log1m_ct, events, 0)
+        found = []
+        for j0, n in self._sub_chunks(k0, m):
+            run_a, run_b, run_dw, bin_run, bin_w = self._layout(k0 + j0, n)
+            seed = int(self.rng.integers(0, 2**63))
+            events, n_events = _spad_chunk(out[j0 : j0 + n], run_a, run_b, run_dw, bin_run, bin_w, self.dcr,
+                                           self.q_gate, self.gate_s, seed, SPARSE_MAX_PROBABILITY, self.log1m_ap,
+                                           self.log1m_ct, np.empty((1024, 3), np.int64), 0)
+            events = events[:n_events]
+            events[:, 0] += j0
+            found.append(events)
+        events = np.concatenate(found)
+        n_events = len(events)
         carry, self._carry = self._carry, None
         if len(carry):
             _apply_events(out, carry, len(carry), 0)
@@ -498,6 +527,25 @@ class SpadChunker:
         # afterpulses of the very last bin fall outside the recording
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out
+
+    def _sub_chunks(self, k0: int, m: int):
+        """Split bins so that no kernel call spans more than :data:`MAX_KEYFRAMES_PER_CALL` keyframes.
+
+        The kernel holds two images per linear piece; dense keyframes (fast motion) would otherwise make that
+        grow with the keyframe rate.
+        """
+        times = self.tl.times_s
+        j0 = 0
+        while j0 < m:
+            t_a = self.t0 + (k0 + j0) * self.bin_s
+            i = int(np.searchsorted(times, t_a, side="right"))
+            t_limit = times[min(i + MAX_KEYFRAMES_PER_CALL - 1, len(times) - 1)]
+            if i + MAX_KEYFRAMES_PER_CALL - 1 >= len(times):
+                n = m - j0
+            else:
+                n = int(np.clip(math.floor((t_limit - self.gate_s - t_a) / self.bin_s) + 1, 1, m - j0))
+            yield j0, n
+            j0 += n
 
     def _layout(self, k0: int, m: int):
         """Stack the runs of one chunk for the kernel: (run_a, run_b [R,H,W], run_dw [R], bin_run [m], bin_w [m])."""
@@ -546,6 +594,11 @@ class SpadChunker:
             dw = bin_s / span
             yield j, e - j, ya, yb, float(w0), float(dw)
             j = e
+
+
+def h5_chunk_bins(height: int, width: int) -> int:
+    """Bins per HDF5 chunk of ``/spad/bits`` (~1 MiB: readers can fetch short windows of bins cheaply)."""
+    return int(np.clip((1 << 20) // max(height * ((width + 7) // 8), 1), 1, MAX_CHUNK_BINS))
 
 
 def chunk_bins(height: int, width: int) -> int:
@@ -604,9 +657,10 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     m = chunk_bins(H, W)
     writer.set_attrs("spad", **attrs)
     writer.write_dataset("spad/dcr_cps", dcr, attrs={"units": "counts s-1"})
-    bits = writer.append_dataset("spad/bits", (H, (W + 7) // 8), np.uint8, chunk_rows=min(m, max(n, 1)),
+    bits = writer.append_dataset("spad/bits", (H, (W + 7) // 8), np.uint8,
+                                 chunk_rows=min(h5_chunk_bins(H, W), max(n, 1)),
                                  attrs={"bit_order": "little", "axis_packed": "width"})
-    t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)) * 8)
+    t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)))
     chunker = SpadChunker(flux_tl, t0, n, resolved, dcr, rng)
     bar = _progress(progress, n)
     buf = None
