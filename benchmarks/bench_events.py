@@ -25,6 +25,7 @@ import argparse
 import math
 import time
 
+import numba
 import numpy as np
 
 from simspad.radiometry import flux_scale
@@ -125,6 +126,46 @@ def run_naive(tl: Timeline, params: EventParams, lux: float, substeps: int = 1, 
     return t_all.size, time.perf_counter() - t_start, frame_times.size
 
 
+_STREAM_CHILD = """
+import sys, numpy as np
+from simspad.io.recording import RecordingWriter
+from simspad.sensors import events
+from simspad.sensors.presets import EventParams
+from simspad.timeline import Timeline
+tl = Timeline.open(sys.argv[1]).photon_flux(1000.0)
+with RecordingWriter(sys.argv[2], {"width": tl.width, "height": tl.height, "duration_s": tl.t_end, "lux": 1000.0}) as w:
+    a = events.simulate_events(w, tl, tl.t_start, tl.t_end, EventParams(), np.random.default_rng(0), 1000.0)
+# VmHWM: this process's own peak resident set (ru_maxrss would carry the parent's peak over fork + exec)
+hwm_kib = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM"))
+print(a["n_events"], hwm_kib)
+"""
+
+
+def streaming_memory(size: int, lengths: tuple[int, ...], rate_hz: float) -> list[tuple[int, int, float]]:
+    """Peak RSS of a fresh process streaming render directories of increasing length to an HDF5 recording.
+
+    Returns ``(keyframes, events, peak MiB)`` per length.
+    """
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from simspad.timeline import write_render_dir
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in lengths:
+            tl = make_timeline(size, n, rate_hz, 1.0)
+            render = Path(tmp) / f"render{n}"
+            write_render_dir(render, tl.times_s, np.stack([tl.keyframe(i) for i in range(n)]))
+            del tl
+            out = subprocess.run([sys.executable, "-c", _STREAM_CHILD, str(render), str(Path(tmp) / f"r{n}.h5")],
+                                 check=True, capture_output=True, text=True).stdout.split()
+            rows.append((n, int(out[0]), int(out[1]) / 1024.0))
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=256, help="sensor width = height, pixels")
@@ -132,6 +173,9 @@ def main(argv=None):
     parser.add_argument("--rate", type=float, default=1000.0, help="keyframe rate, Hz")
     parser.add_argument("--lux", type=float, default=1000.0)
     parser.add_argument("--repeat", type=int, default=3, help="runs per contender; the fastest is reported")
+    parser.add_argument("--memory", action=argparse.BooleanOptionalAction, default=True,
+                        help="also measure peak memory while streaming a sequence and one 4x as long")
+    parser.add_argument("--memory-size", type=int, default=128)
     args = parser.parse_args(argv)
     params = EventParams()
     tl = make_timeline(args.size, args.keyframes, args.rate, args.lux)
@@ -157,7 +201,8 @@ def main(argv=None):
 
     kf_s = args.keyframes - 1
     print(f"scene: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "
-          f"({duration * 1e3:.0f} ms), {args.lux:g} lx, bright-pixel tau = {tau_min * 1e6:.0f} us")
+          f"({duration * 1e3:.0f} ms), {args.lux:g} lx, bright-pixel tau = {tau_min * 1e6:.0f} us; "
+          f"simspad on {numba.get_num_threads()} numba thread(s) (NUMBA_NUM_THREADS), NumPy reference single-threaded")
     print(f"{'run':<26}{'wall s':>9}{'events':>11}{'events/s':>12}{'keyframes/s':>13}{'frames/s':>11}")
     rows = [("simspad (numba)", sec_s, n_s, kf_s / sec_s, kf_s / sec_s),
             ("naive @ keyframes", sec_k, n_k, kf_s / sec_k, (frames_k - 1) / sec_k),
@@ -169,6 +214,11 @@ def main(argv=None):
           f"events/s ratio {(n_s / sec_s) / (n_k / sec_k):.2f}x")
     print(f"speed-up vs naive @ tau/4:     {sec_f / sec_ss:.2f}x wall time for the same simulated interval, "
           f"events/s ratio {(n_ss / sec_ss) / (n_f / sec_f):.2f}x")
+    if args.memory:
+        print("streaming to HDF5 from a render directory (fresh process each; peak resident memory):")
+        for n, n_events, mib in streaming_memory(args.memory_size, (args.keyframes, 4 * args.keyframes), args.rate):
+            print(f"  {args.memory_size}x{args.memory_size} px, {n:5d} keyframes: {n_events:9d} events, "
+                  f"peak RSS {mib:7.1f} MiB")
 
 
 if __name__ == "__main__":

@@ -315,7 +315,10 @@ class Timeline:
         if w == 0.0:
             return za.copy()
         zb = self._cache.get(i + 1)["z"]
-        return (za + np.float32(w) * (zb - za)).astype(np.float32)
+        with np.errstate(invalid="ignore"):
+            z = (za + np.float32(w) * (zb - za)).astype(np.float32)
+        # Where a ray hits nothing (+inf) at either end, take the nearer keyframe's value instead of inf − inf.
+        return np.where(np.isfinite(za) & np.isfinite(zb), z, za if w < 0.5 else zb).astype(np.float32)
 
     def segments(self, t0: float, t1: float) -> Iterator[tuple[float, float, np.ndarray, np.ndarray]]:
         """Linear pieces covering [t0, t1]: ``(ta, tb, Ya, Yb)`` with values at ta and tb, in time order.

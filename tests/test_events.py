@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import numba
 import numpy as np
 import pytest
 from scipy import stats
@@ -174,14 +175,22 @@ def test_thresholds_never_reach_zero(tmp_path):
         events.validate_params(dataclasses.replace(params, threshold_min=0.0))
 
 
-def test_same_seed_same_events_whatever_the_chunking(tmp_path):
+def test_same_seed_same_events_whatever_the_chunking_and_threads(tmp_path):
     params = EventParams(shot_noise_rate_hz_at_1lux=20.0, hot_pixel_fraction=0.05)
     rng = np.random.default_rng(1)
     times = np.linspace(0.0, 0.05, 26)
     frames = 1e16 * np.exp(rng.normal(0, 0.5, (26, 12, 10)))
     a, _, _ = _run(tmp_path, times, frames, params, seed=4, name="a.h5")
     b, _, _ = _run(tmp_path, times, frames, params, seed=4, name="b.h5", chunk_bytes=1)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        d, _, _ = _run(tmp_path, times, frames, params, seed=4, name="d.h5")
+    finally:
+        numba.set_num_threads(threads)
     c, _, _ = _run(tmp_path, times, frames, params, seed=5, name="c.h5")
-    for key in ("t", "x", "y", "p", "label"):
+    assert a["t"].size > 500
+    for key in ("t", "x", "y", "p", "label", "ms_to_idx"):
         np.testing.assert_array_equal(a[key], b[key])
+        np.testing.assert_array_equal(a[key], d[key])
     assert a["t"].size != c["t"].size or not np.array_equal(a["t"], c["t"])

@@ -107,6 +107,28 @@ def test_window_fluence_is_exact_for_motion_and_rolling_shutter():
     np.testing.assert_allclose(f[:, 0], expected, rtol=1e-6)
 
 
+def test_rolling_shutter_recording_skews_rows_and_fits_the_readout(tmp_path):
+    """A brightening flat field seen through a rolling shutter: lower rows integrate later, brighter light."""
+    H, W, line_s = 24, 32, 1e-4
+    ramp = Timeline.from_arrays([0.0, 0.1], np.stack([np.full((H, W), 1e16), np.full((H, W), 1e17)]).astype(np.float32))
+    params = FrameParams(exposure_s=8e-3, frame_rate_hz=100.0, rolling_shutter_line_s=line_s)
+    with RecordingWriter(tmp_path / "rs.h5", {"width": W, "height": H, "duration_s": 0.1, "lux": 1.0}) as w:
+        attrs = frame.simulate_frames(w, ramp, 0.0, 0.1, params, np.random.default_rng(2))
+    with open_recording(tmp_path / "rs.h5") as rec:
+        dn = rec.frames_dn().astype(np.float64)
+        t_start = rec.frames_t_start
+    assert attrs["shutter"] == "rolling" and attrs["readout_s"] == pytest.approx((H - 1) * line_s)
+    assert t_start[-1] + 8e-3 + (H - 1) * line_s <= 0.1 + 1e-12  # every row of every frame inside the interval
+    assert dn.shape[0] == 9  # a global shutter fits 10; the 10th frame's last rows would end after 0.1 s
+    k = dn.shape[0] - 1
+    row_means = dn[k].mean(axis=1) - params.black_level_dn
+    starts = t_start[k] + np.arange(H) * line_s
+    fluence = (1e16 + 9e17 * (starts + 4e-3)) * 8e-3
+    expected = params.gain_dn_per_e * params.qe * fluence * params.pixel_pitch_m ** 2
+    np.testing.assert_allclose(row_means, expected, rtol=0.02)
+    assert np.polyfit(np.arange(H), row_means, 1)[0] > 0
+
+
 def test_bayer_mosaic_follows_the_colour_of_the_scene(tmp_path):
     red = np.zeros((2, 6, 8, 3), np.float32)
     red[..., 0] = 3e17

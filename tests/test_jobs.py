@@ -120,22 +120,21 @@ def test_rerun_is_a_no_op(tiny):
 
 
 def test_dask_is_bit_identical_to_local(tiny):
-    """Both Dask paths: a LocalCluster started by `generate` (workers=2) and joining a running scheduler by
-    address (as on a cluster). Every recording's sha256 must equal the local executor's."""
+    """Joining a running Dask scheduler by address (as on a cluster; here a real LocalCluster of 2 single-threaded
+    worker processes): every recording's sha256 equals the local executor's. (The LocalCluster that `generate`
+    starts itself runs in test_spec_change_redoes_only_what_changed.)"""
     from distributed import LocalCluster
 
     root, spec_path, out, _ = tiny
     local = {e["path"]: e["sha256"] for e in read_manifest(out)["recordings"]}
-    generate(load_spec(spec_path), root / "dask", executor="dask", workers=2, progress=False, created_utc=CREATED)
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                       silence_logs=40) as cluster:
-        generate(load_spec(spec_path), root / "dask_join", executor="dask", scheduler=cluster.scheduler_address,
+        generate(load_spec(spec_path), root / "dask", executor="dask", scheduler=cluster.scheduler_address,
                  progress=False, created_utc=CREATED)
-    for name in ("dask", "dask_join"):
-        m = read_manifest(root / name)
-        assert {e["path"]: e["sha256"] for e in m["recordings"]} == local
-        for e in m["recordings"]:
-            assert file_sha256(root / name / e["path"]) == e["sha256"]
+    m = read_manifest(root / "dask")
+    assert {e["path"]: e["sha256"] for e in m["recordings"]} == local
+    for e in m["recordings"]:
+        assert file_sha256(root / "dask" / e["path"]) == e["sha256"]
     with pytest.raises(SimSpadError, match="--scheduler"):
         generate(load_spec(spec_path), root / "bad", executor="local", scheduler="tcp://127.0.0.1:1", progress=False)
 
@@ -160,7 +159,7 @@ def test_spec_change_redoes_only_what_changed(tiny):
     before = {e["path"]: (_stat(changed, e["path"]), e["sha256"]) for e in read_manifest(changed)["recordings"]}
     # Sequence b renders with more samples; the 100 lx level becomes 1000 lx.
     spec2 = load_spec(_write_spec(root / "changed.toml", lux=(1, 1000), spp_b=4))
-    res = generate(spec2, changed, workers=2, progress=False, result=True)
+    res = generate(spec2, changed, executor="dask", workers=2, progress=False, result=True)
     assert sorted(res.skipped) == ["recordings/a/a_1lx.h5"]
     assert sorted(res.done) == ["recordings/a/a_1000lx.h5", "recordings/b/b_1000lx.h5", "recordings/b/b_1lx.h5"]
     assert [Path(r).name.rsplit("-", 1)[0] for r in res.renders_done] == ["b"]

@@ -60,3 +60,38 @@ def test_adaptive_reads_static_regions_rarely(rec_path):
     tiles_x = SHAPE[1] // 8
     per_tile = pol.tile_reads.reshape(SHAPE[0] // 8, tiles_x)
     assert per_tile[:, :4].mean() < 0.5 * per_tile[:, 4:].mean(), per_tile
+
+
+def test_integration_since_last_readout_uses_all_pending_bins(tmp_path):
+    """A tile read after skipping windows gets NEDI over every bin since its previous readout."""
+    from simspad.methods.adaptive import TilePolicy
+    from simspad.methods.akf import AkfState
+    from simspad.methods.nedi import spad_measurements
+    from simspad.methods.registry import BandwidthTally
+    from simspad.methods.spad_response import SpadResponse, estimate_flux
+
+    path = tmp_path / "flat.h5"
+    write_recording(path, lambda t: np.full((8, 8), 2e15), shape=(8, 8), duration_s=0.012, frames=False,
+                    dcr_cps=10.0)
+    with open_recording(path) as rec:
+        resp = SpadResponse.from_recording(rec)
+        tally = BandwidthTally()
+        meas = list(spad_measurements(rec, 100, use_events=True, until_s=0.011, tally=tally))
+        pol = TilePolicy((8, 8), tally, resp, tile_px=8, threshold=0.5, integrate=True, max_windows=16)
+        st = AkfState(8, 8, 0.0)
+        st.P[:] = 1.0
+        mask, _ = pol.select(st, meas[0], True)  # first window: read
+        st.P[:] = 0.1
+        for j in (1, 2):
+            mask, _ = pol.select(st, meas[j], False)  # below threshold: keep counting
+            assert not mask.any()
+        st.P[:] = 1.0
+        mask, m3 = pol.select(st, meas[3], False)
+        assert mask.all()
+        counts = sum(meas[j].raw_counts for j in (1, 2, 3))
+        expected = estimate_flux(counts, 300, resp.q_m2, resp.gate_s, resp.dcr_cps.reshape(-1))
+        assert np.allclose(m3.flux_ref, expected, rtol=1e-9)
+        assert np.allclose(m3.var_log, m3.var_log_model(m3.flux_ref), rtol=1e-9)
+    assert pol.tile_reads.tolist() == [2]
+    # bits: one 7-bit aggregate (100 bins) and one 9-bit aggregate (300 bins) per pixel
+    assert tally.bits == 7 + 9

@@ -37,6 +37,8 @@ def test_registry_lists_methods_and_requirements():
     assert get_method("ni", n_bins=100).n_bins == 100
     with pytest.raises(SimSpadError, match="unknown method 'nope'"):
         get_method("nope")
+    with pytest.raises(SimSpadError, match="bad parameters"):
+        get_method("ni", no_such_parameter=1)
 
 
 def test_missing_sensor_is_refused(tmp_path):

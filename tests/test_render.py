@@ -242,6 +242,8 @@ def test_object_trajectory_moves_the_mesh(tmp_path):
         assert np.nanmin(tl.keyframe_depth(i)) == pytest.approx(CAMERA_Z - 0.5 - 0.15, rel=0.05)
     # Object speed 60 m/s at 1.35 m: the schedule follows the object, far above the 200 Hz floor.
     assert s.n_keyframes > 0.01 * 200 * 3
+    assert s.compiled_after_first in (0, -1), s.describe()  # moving vertices does not recompile either
+    assert np.isinf(tl.depth(0.5 * (tl.times_s[0] + tl.times_s[1]))).sum() == 0  # the wall is everywhere behind
 
 
 # ------------------------------------------------------------------------------------------ bad input

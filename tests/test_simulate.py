@@ -39,7 +39,8 @@ def render_dir(tmp_path):
 
 
 def _sensors(**spad):
-    return {"spad": sensor_params("spad", None, spad), "frames": sensor_params("frames", None, {"frame_rate_hz": 1000.0}),
+    return {"spad": sensor_params("spad", None, spad),
+            "frames": sensor_params("frames", None, {"frame_rate_hz": 1000.0}),
             "events": sensor_params("events")}
 
 

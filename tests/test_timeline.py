@@ -181,3 +181,15 @@ def test_open_reports_file_and_field(render_dir, case, where, field):
         tl.keyframe(0)  # pixel values are checked when a frame is read
     message = str(info.value)
     assert where in message and field in message, message
+
+
+def test_depth_with_no_hit_pixels_never_becomes_nan():
+    z0 = np.full((H, W), 2.0, np.float32)
+    z1 = z0.copy()
+    z0[0, 0] = z1[0, 0] = np.inf  # sky in both
+    z1[1, 1] = np.inf  # sky appears
+    tl = Timeline.from_arrays([0.0, 1.0], np.ones((2, H, W), np.float32), depth=np.stack([z0, z1]))
+    early, late = tl.depth(0.25), tl.depth(0.75)
+    assert not np.isnan(early).any() and not np.isnan(late).any()
+    assert np.isinf(early[0, 0]) and early[1, 1] == 2.0 and np.isinf(late[1, 1])
+    assert early[2, 2] == pytest.approx(2.0)

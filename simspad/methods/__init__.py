@@ -1,4 +1,22 @@
-"""Fusion methods and baselines (DESIGN §7): read recordings only, output flux frames and their bandwidth."""
+"""Fusion methods and baselines (DESIGN §7): read recordings only, output flux frames and their bandwidth.
+
+=====================  ==========================  =========================================================
+name                   label                       what it reads / does (defaults and their source)
+=====================  ==========================  =========================================================
+``nedi_akf``           NEDI+AKF (S+E)              SPAD aggregates at 0.4 kHz (the paper's rate) deblurred by
+                                                   NEDI, fused with events by the AKF (:mod:`.akf`)
+``adaptive_nedi_akf``  Adaptive NEDI+AKF (S+E)     the same, reading a tile's aggregate only when its mean P
+                                                   exceeds (c/2)² (:mod:`.adaptive`)
+``akf_fe``             AKF (F+E)                   conventional frames, EDI-deblurred, fused by the AKF
+``cf``                 CF (E)                      events only, complementary filter, f_cut 0.1 Hz (:mod:`.cf`)
+``edi``                EDI (F+E)                   event double integral at the nominal threshold (:mod:`.edi`)
+``ni``                 NI (S)                      SPAD aggregates at 0.4 kHz, ML inversion (:mod:`.ni`)
+``nedi``               NEDI (S+E)                  SPAD aggregates deblurred by NEDI (:mod:`.nedi`)
+``qbp``                QBP (S)                     raw bits: align and merge 1000-bin bursts (:mod:`.qbp`)
+=====================  ==========================  =========================================================
+
+All parameters come from the recording's attrs (DESIGN §5); none is tuned per scene.
+"""
 
 from simspad.methods.registry import Bandwidth, Method, Reconstruction, available_methods, get_method, register
 

@@ -2,8 +2,9 @@
 
 L̇ = e(t) − α(L − L^F) with L^F = 0 (no frames): per event at a pixel, ``L ← β·L ± c`` with
 ``β = exp(−α·Δt)`` since the pixel's last update; at an output instant every pixel decays to that time.
-``α = 2π·f_cut``; the default cut-off ``f_cut = 1 Hz`` keeps the high-pass leak far slower than motion at the
-sequence time scales (ms) while forgetting the unknown initial image over seconds. The output ``exp(L)`` has
+``α = 2π·f_cut``; the default cut-off ``f_cut = 0.1 Hz`` (time constant 1.6 s) keeps the high-pass leak far
+slower than motion on the time scales scored here (ms to 1 s), while noise and leak events are forgotten over
+seconds in long recordings. Without frames the initial image is unknown (L = 0): only changes are recovered. The output ``exp(L)`` has
 no absolute scale (scored after an affine log fit, DESIGN §8).
 """
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Iterator
 
 import numpy as np
+from scipy import ndimage
 
 from simspad.methods.events_util import EventCursor, group_by_pixel, mean_exp_level
 from simspad.methods.registry import BandwidthTally, Method
@@ -54,6 +55,7 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
     periods = np.diff(centres) if K > 1 else np.array([te[0] - ts[0]])
     cursor = EventCursor(rec) if use_events else None
     n_pix = int(rec.width) * int(rec.height)
+    bayer = bool(rec.frames_attrs.get("rgb", False)) and str(rec.frames_attrs.get("rgb")).lower() not in ("false", "0")
     for k in range(K):
         a, b = bounds[k], bounds[k + 1]
         exposure = te[k] - ts[k]
@@ -63,6 +65,11 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
 
             raise InputError("frames must be monochrome [H, W] for the frame methods", path=rec.path,
                              field="/frames/dn")
+        if bayer:
+            # RGGB mosaic: a 2×2 box over (DN − black) gives (R + 2G + B)/4 at every pixel, a luminance proxy
+            # (the per-channel QE is not in the attrs); documented approximation.
+            dn = resp.black_level_dn + ndimage.uniform_filter(dn.astype(np.float64) - resp.black_level_dn, 2,
+                                                              mode="nearest")
         blur = resp.flux(dn, exposure)
         if cursor is not None:
             events = cursor.take(a, b)

@@ -184,7 +184,15 @@ def get_method(name: str, **params) -> Method:
         raise SimSpadError(f"unknown method {name!r} (expected one of {', '.join(sorted(_REGISTRY))})",
                            field="methods")
     factory = _REGISTRY[name]
-    return factory(**params) if params else factory()
+    if not params:
+        return factory()
+    try:
+        return factory(**params)
+    except TypeError as exc:
+        from simspad.errors import SimSpadError
+
+        raise SimSpadError(f"bad parameters {sorted(params)} for method {name!r} ({exc})",
+                           field=f"methods.{name}") from None
 
 
 def available_methods(rec=None) -> list[str]:

@@ -70,7 +70,12 @@ class Measurement:
         if self.var_log_model is None:
             return self.var_log
         own = self.var_log_model(np.maximum(self.flux_ref, self.floor_flux))
-        return self.var_log * self.var_log_model(flux_pred) / own
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            ratio = self.var_log_model(flux_pred) / own
+        # Within a factor 4 the prediction removes the bias of self-weighting; beyond that prediction and
+        # measurement disagree (a change the events missed) and the innovation test deals with it.
+        ratio = np.where(np.isfinite(ratio), np.clip(ratio, 0.25, 4.0), 1.0)
+        return self.var_log * ratio
 
     def log_flux_at_start(self) -> np.ndarray:
         """ln Φ(a) = ln max(Φ(f), floor) − ℓ(f)."""

@@ -13,8 +13,10 @@ from typing import Callable
 
 import numpy as np
 
-#: A 10.24 µs SPAD bin (SwissSPAD2 at 97.7 kHz): the rate a brute-force renderer would need.
-SPAD_BIN_S = 10.24e-6
+from simspad.sensors.presets import SpadParams
+
+#: The SPAD preset's bin (SwissSPAD2: 10.24 µs, 97.7 kHz): the rate a brute-force renderer would need.
+SPAD_BIN_S = SpadParams().bin_s
 #: Grid cells per smallest keyframe interval when integrating the predicted image speed.
 _CELLS_PER_STEP = 4
 #: Image points per axis at which the camera-induced flow is evaluated (its maximum lies on the border).

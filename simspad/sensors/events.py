@@ -4,15 +4,15 @@ Per pixel (flattened index ``y·W + x``):
 
 - **photocurrent** ``I(t) = qe·fill·pitch²·Φ(t) + dark_current`` (e⁻ s⁻¹), linear in time between keyframes;
 - **photoreceptor**: first-order low-pass of ``ln I`` with cutoff ``f_c = f_max·I/(I + I_ref)``, so dim pixels
-  lag (``τ = 1/(2π f_c)``); integrated *exactly* for an input that is linear in time over each internal step
-  (exponential integrator), so the step needs no ``τ/4`` stability limit, only an accuracy one: inside a step
-  the filtered value is interpolated linearly, and the step is chosen so that this chord stays within
-  ``substep_tolerance`` × the pixel's smaller threshold of the exact path (curvature of ln of the linear input,
-  and of the photoreceptor's transient after a change of slope). Static pixels and steadily tracking ones take
-  one step per keyframe interval; cost follows what changes;
-- **change detector**: ON when ``L_p − ref + leak·(t − t_ref) ≥ θ_on``, OFF when ``≤ −θ_off``; at an event the
-  reference resets to the current ``L_p``. Within a step the detector signal is linear in time, so every
-  crossing — several per step included — gets its own interpolated instant; nothing snaps to keyframes;
+  lag (``τ = 1/(2π f_c)``). It is integrated *exactly* for an input whose log is linear in time over each internal
+  step (exponential integrator), so there is no ``τ/4`` stability limit; the step only has to keep ln of the
+  timeline's linear-in-time photocurrent close to linear: chord error ``(Δ ln I)²/8 ≤ substep_tolerance ×`` the
+  pixel's smaller threshold (which also bounds how much τ(I) varies inside a step). Static pixels and slowly
+  changing ones take one step per keyframe interval; cost follows what changes;
+- **change detector**: ON when ``D = L_p − ref + leak·(t − t_ref) ≥ θ_on``, OFF when ``D ≤ −θ_off``; at an event
+  the reference resets to the current ``L_p``. Inside a step ``D(x) = A + B·x + c·exp(−x/τ)`` exactly, with at
+  most one stationary point, so each crossing — several per step included — is solved on its monotone piece
+  (closed form once the transient has decayed, Newton otherwise) to 1 ns: nothing snaps to keyframes;
 - **thresholds** ``θ ~ N(nominal, threshold_sigma)`` per pixel and polarity, fixed for the recording, clamped to
   ``≥ threshold_min`` (> 0);
 - **leak**: the reference drifts down at ``leak_rate·θ_on`` per second (log-normal per-pixel rate, median
@@ -20,13 +20,12 @@ Per pixel (flattened index ``y·W + x``):
   owes more to the drift than to the light is labelled leak (2);
 - **shot noise** (label 1): a Poisson process of random polarity with rate ``r(I) = r₁·(I₁/I)^γ``, where ``I₁`` is
   the photocurrent of a pixel seeing the scene's mean luminance at 1 lx (plus dark current) and
-  ``r₁ = shot_noise_rate_hz_at_1lux``. Why it rises as light falls (Graça & Delbruck 2021): the relative
-  shot-noise fluctuation of the photocurrent over the pixel's integration window scales as ``1/sqrt(I)``; at low
-  light the DVS noise bandwidth is no longer set by the (shrinking) photoreceptor alone, so the fluctuation
-  reaching the detector grows as light falls. A first-passage rate is steep in the fluctuation amplitude; we use
-  the measured-shaped power law with default ``γ = 0.5`` (the amplitude's scaling) and cap it physically by the
-  dark current (``I ≥ I_dark``) and the refractory period. Noise events do not move the reference (they are
-  transient excursions), so a static scene yields only noise-labelled events;
+  ``r₁ = shot_noise_rate_hz_at_1lux``. Graça & Delbruck (2021) explain why DVS noise rises as light falls: the
+  photocurrent's relative shot-noise amplitude grows as ``1/sqrt(I)``, and in dim light it is no longer offset by a
+  shrinking photoreceptor bandwidth alone. We model the result, not the first-passage process: a power law in the
+  photocurrent, ``γ = shot_noise_current_exponent`` (default 0.5, the amplitude's scaling), calibrated at 1 lx.
+  The rate saturates in the dark because ``I ≥ I_dark``, and the refractory period caps it. Noise events do not
+  move the reference (they are transient excursions), so a static scene yields only noise-labelled events;
 - **hot pixels** (label 3): a fraction of pixels fire an extra Poisson process at ``hot_pixel_rate_hz``;
 - **readout**: timestamp = detection + ``max(0, latency + jitter·z)``; the pixel is blind from detection until
   ``refractory_s`` after its event is read out, so events of one pixel are ≥ ``refractory_s`` apart; a signal
@@ -192,7 +191,7 @@ def _normal(state):
     return state, math.sqrt(-2.0 * math.log(u1)) * math.cos(_TWO_PI * u2)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level):
     """Root of D(x) = level on [lo, hi] where D = a_off + b_slope·x + c·exp(−x/τ) is monotone.
 
@@ -224,7 +223,7 @@ def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level):
     return x
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _first_crossing(a_off, b_slope, c, tau, x0, h, d0, dh, theta_on, theta_off):
     """First x in (x0, h] where D(x) = a_off + b_slope·x + c·exp(−x/τ) reaches θ_on or −θ_off.
 
@@ -273,7 +272,7 @@ def _init_state(current0, rng_state, lp, ref, t_ref, t_avail, hz_shot, hz_hot, t
         rng_state[p] = s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef, shot_exp,
                 f_max, i_ref, step_tol, latency, jitter, refractory,
                 lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
@@ -334,8 +333,11 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                 decay = math.exp(-h / tau)
                 lp_e = l_e - k * tau + (lp - l_t + k * tau) * decay
                 r_shot = 0.0
-                if shot_coef > 0.0:
-                    r_shot = shot_coef * math.exp(-shot_exp * 0.5 * (l_t + l_e))
+                if shot_coef > 0.0:  # rate at the step's geometric-mean photocurrent
+                    if shot_exp == 0.5:
+                        r_shot = shot_coef / math.sqrt(math.sqrt(i_t * i_e))
+                    else:
+                        r_shot = shot_coef * math.exp(-shot_exp * 0.5 * (l_t + l_e))
                 # ---- events inside [t, s_b]. Exact path, x = s − t:  lp(x) = l_t + k·x − k·τ + c·exp(−x/τ);
                 # detector D(x) = lp(x) − ref + ρ·(s − t_ref) = A + B·x + c·exp(−x/τ)
                 c = lp - l_t + k * tau
@@ -386,7 +388,14 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                                 d_sig = theta_on if pol == 1 else -theta_off
                     t_shot = cur + hz_shot / r_shot if r_shot > 0.0 else np.inf
                     t_hot = cur + hz_hot / r_hot if r_hot > 0.0 else np.inf
-                    t_next = min(t_sig, min(t_shot, t_hot))
+                    kind = 0  # which process fires first: 0 signal, 1 shot noise, 3 hot pixel
+                    t_next = t_sig
+                    if t_shot < t_next:
+                        kind = 1
+                        t_next = t_shot
+                    if t_hot < t_next:
+                        kind = 3
+                        t_next = t_hot
                     if t_next > s_b:
                         dt = s_b - cur
                         hz_shot -= r_shot * dt
@@ -397,14 +406,14 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                     hz_shot -= r_shot * dt
                     hz_hot -= r_hot * dt
                     cur = t_next
-                    if t_next == t_sig:
+                    if kind == 0:
                         lp_now = ref + d_sig - rho * (cur - t_ref)
                         label = 0
                         if pol == 1 and rho * (cur - t_ref) > lp_now - ref:
                             label = 2
                         ref = lp_now
                         t_ref = cur
-                    elif t_next == t_shot:
+                    elif kind == 1:
                         rs, e = _exponential(rs)
                         hz_shot = e
                         rs, u = _uniform(rs)
@@ -565,7 +574,7 @@ class EventSimulator:
                     self.t_ref, self.t_avail, self.hz_shot, self.hz_hot, float(t0))
         self._pending = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.uint8),
                          np.empty(0, np.uint8))
-        self._cap = 1 << 16
+        self._cap = max(1 << 16, 4 * n)  # events expected per chunk (adapts; an overflow retries the chunk)
 
     def advance(self, knot_t: np.ndarray, knot_current: np.ndarray):
         """Run the pieces between ``knot_t`` (m+1 instants) on photocurrents ``[m+1, H·W]``.

@@ -259,6 +259,11 @@ def simulate_frames(writer, flux_tl, t0: float, t1: float, params: FrameParams, 
     params : FrameParams
     rng : numpy.random.Generator
         The sensor's own stream; the fixed pattern is drawn first, then frames in order.
+
+    Notes
+    -----
+    ``exposure_s = "auto"`` is resolved from the flux at ``t0`` (the first keyframe unless the recording starts
+    later) and recorded in the attrs with ``exposure_mode``.
     progress : bool
         Show a progress bar.
 

@@ -310,30 +310,31 @@ def _secondaries(state, events, n_events, ap_left, ct_left, k, y, x, H, W, log1m
 
 
 @numba.njit(inline="always")
-def _lam(run_a, run_b, bin_run, bin_w, k, y, x, q_gate, dark):
+def _lam(images, run_ia, run_ib, bin_run, bin_w, k, y, x, q_gate, dark):
     """Λ of bin k at pixel (y, x): the gate's mean flux is affine in w within the bin's run."""
     r = bin_run[k]
-    a = float(run_a[r, y, x])
-    lam = q_gate * (a + (float(run_b[r, y, x]) - a) * bin_w[k]) + dark
+    a = float(images[run_ia[r], y, x])
+    lam = q_gate * (a + (float(images[run_ib[r], y, x]) - a) * bin_w[k]) + dark
     return lam if lam > 0.0 else 0.0
 
 
 @numba.njit(cache=True)
-def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, seed, sparse_max_p,
-                log1m_ap, log1m_ct, events, n_events):
+def _spad_chunk(out, images, run_ia, run_ib, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, seed,
+                sparse_max_p, log1m_ap, log1m_ct, events, n_events):
     """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [m, H, ceil(W/8)].
 
-    Bin k belongs to run r = bin_run[k]; its gate-mean flux is ``A_r + (B_r − A_r)·bin_w[k]`` (A_r = run_a[r],
-    B_r = run_b[r]; w advances by run_dw[r] per bin), so Λ_k = q_gate·mean + dcr·gate_s exactly (a gate that
-    straddles a keyframe is a run of its own with A = B = its exact mean). Secondary detections (afterpulses in
-    bin k+1, crosstalk to neighbours in bin k) are appended to ``events`` as (bin, row, col).
+    Bin k belongs to run r = bin_run[k]; its gate-mean flux is ``A_r + (B_r − A_r)·bin_w[k]`` (A_r =
+    images[run_ia[r]], B_r = images[run_ib[r]]; w advances by run_dw[r] per bin), so Λ_k = q_gate·mean +
+    dcr·gate_s exactly (a gate that straddles a keyframe is a run of its own with A = B = its exact mean), so
+    the images bound every gate mean of the call. Secondary detections (afterpulses in bin k+1, crosstalk to
+    neighbours in bin k) are appended to ``events`` as (bin, row, col).
 
     The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse pixels
     one by one (geometric skips + thinning); dense bytes bin by bin, assembled in a register, with
     z = exp(−Λ) advanced by one multiplication per bin inside a run.
     """
     m = out.shape[0]
-    n_runs, H, W = run_a.shape
+    H, W = images.shape[1], images.shape[2]
     Wb = (W + 7) // 8
     state = np.uint64(seed)
     ap_left = np.int64(1) << 62  # never reaches zero when the effect is off
@@ -356,11 +357,10 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
                 x = 8 * xb + bit
                 hi = 0.0
                 lo = np.inf
-                for r in range(n_runs):
-                    a = float(run_a[r, y, x])
-                    b = float(run_b[r, y, x])
-                    hi = max(hi, a, b)
-                    lo = min(lo, a, b)
+                for i in range(images.shape[0]):
+                    v = float(images[i, y, x])
+                    hi = max(hi, v)
+                    lo = min(lo, v)
                 dark = float(dcr[y, x]) * gate_s
                 lam_hi[bit] = q_gate * hi + dark
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
@@ -392,7 +392,8 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
                         state, u = _next_uniform(state)
                         up = u * p_max
                         if up >= p_min:
-                            if up >= -math.expm1(-_lam(run_a, run_b, bin_run, bin_w, k, y, x, q_gate, dark)):
+                            lam = _lam(images, run_ia, run_ib, bin_run, bin_w, k, y, x, q_gate, dark)
+                            if up >= -math.expm1(-lam):
                                 continue
                     out[k, y, xb] |= mask
                     state, events, n_events, ap_left, ct_left = _secondaries(
@@ -410,9 +411,10 @@ def _spad_chunk(out, run_a, run_b, run_dw, bin_run, bin_w, dcr, q_gate, gate_s, 
                     for bit in range(min(8, W - 8 * dense_b[i])):
                         x = 8 * dense_b[i] + bit
                         dark = float(dcr[y, x]) * gate_s
-                        z[i - b0, bit] = math.exp(-_lam(run_a, run_b, bin_run, bin_w, k, y, x, q_gate, dark))
-                        slope = q_gate * (float(run_b[r, y, x]) - float(run_a[r, y, x])) * run_dw[r]
-                        ratio[i - b0, bit] = math.exp(-slope)
+                        z[i - b0, bit] = math.exp(-_lam(images, run_ia, run_ib, bin_run, bin_w, k, y, x, q_gate,
+                                                        dark))
+                        slope = q_gate * (float(images[run_ib[r], y, x]) - float(images[run_ia[r], y, x])) * run_dw[r]
+                        ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
             for i in range(b0, b1):
                 ii = i - b0
                 value = np.int64(0)
@@ -509,11 +511,12 @@ class SpadChunker:
             out.fill(0)
         found = []
         for j0, n in self._sub_chunks(k0, m):
-            run_a, run_b, run_dw, bin_run, bin_w = self._layout(k0 + j0, n)
+            images, run_ia, run_ib, run_dw, bin_run, bin_w = self._layout(k0 + j0, n)
             seed = int(self.rng.integers(0, 2**63))
-            events, n_events = _spad_chunk(out[j0 : j0 + n], run_a, run_b, run_dw, bin_run, bin_w, self.dcr,
-                                           self.q_gate, self.gate_s, seed, SPARSE_MAX_PROBABILITY, self.log1m_ap,
-                                           self.log1m_ct, np.empty((1024, 3), np.int64), 0)
+            events, n_events = _spad_chunk(out[j0 : j0 + n], images, run_ia, run_ib, run_dw, bin_run, bin_w,
+                                           self.dcr, self.q_gate, self.gate_s, seed,
+                                           SPARSE_MAX_PROBABILITY, self.log1m_ap, self.log1m_ct,
+                                           np.empty((1024, 3), np.int64), 0)
             events = events[:n_events]
             events[:, 0] += j0
             found.append(events)
@@ -548,27 +551,46 @@ class SpadChunker:
             j0 += n
 
     def _layout(self, k0: int, m: int):
-        """Stack the runs of one chunk for the kernel: (run_a, run_b [R,H,W], run_dw [R], bin_run [m], bin_w [m])."""
+        """Arrays of one kernel call: (images [I,H,W], run_ia, run_ib, run_dw [R], bin_run, bin_w [m]).
+
+        Consecutive pieces share their end images (the same array objects), so each is stacked once. Every gate
+        mean lies between the images of its run (a straddling gate's exact mean is an image of its own), so the
+        images bound the flux of the call.
+        """
         runs = list(self._runs(k0, m))
-        run_a = np.stack([r[2] for r in runs]).astype(np.float32, copy=False)
-        run_b = np.stack([r[3] for r in runs]).astype(np.float32, copy=False)
-        run_dw = np.array([r[5] for r in runs], np.float64)
+        images, index = [], {}
+
+        def image_index(a):
+            key = id(a)
+            if key not in index:
+                index[key] = len(images)
+                images.append(a)
+            return index[key]
+
+        run_ia = np.empty(len(runs), np.int64)
+        run_ib = np.empty(len(runs), np.int64)
+        run_dw = np.empty(len(runs), np.float64)
         bin_run = np.empty(m, np.int64)
         bin_w = np.empty(m, np.float64)
-        for i, (j0, n, _, _, w0, dw) in enumerate(runs):
+        for i, (j0, n, ya, yb, w0, dw, _) in enumerate(runs):
+            run_ia[i] = image_index(ya)
+            run_ib[i] = image_index(yb)
+            run_dw[i] = dw
             bin_run[j0 : j0 + n] = i
             bin_w[j0 : j0 + n] = w0 + dw * np.arange(n)
-        return run_a, run_b, run_dw, bin_run, bin_w
+        stacked = np.stack(images).astype(np.float32, copy=False)
+        return stacked, run_ia, run_ib, run_dw, bin_run, bin_w
 
     def _runs(self, k0: int, m: int):
-        """Yield (j0, n, ya, yb, w0, dw): runs of bins whose gates lie in one linear piece (or one straddling bin)."""
+        """Yield (j0, n, ya, yb, w0, dw, is_piece): runs of bins whose gates lie in one linear piece, or one
+        straddling bin (``is_piece`` False, ya = yb = its exact gate mean)."""
         bin_s, gate = self.bin_s, self.gate_s
         t_first = self.t0 + k0 * bin_s
         t_last_end = self.t0 + (k0 + m - 1) * bin_s + gate
         pieces = list(self.tl.segments(t_first, t_last_end))
         if not pieces:  # a single keyframe: constant in time
             y = self.tl.sample(t_first)
-            yield 0, m, y, y, 0.0, 0.0
+            yield 0, m, y, y, 0.0, 0.0, True
             return
         tol = 1e-6 * gate
         starts = self.t0 + (k0 + np.arange(m)) * bin_s
@@ -582,7 +604,7 @@ class SpadChunker:
             if not inside[j]:
                 t_k = starts[j]
                 y = self.tl.integrate(t_k, t_k + gate) / np.float32(gate)
-                yield j, 1, y, y, 0.0, 0.0
+                yield j, 1, y, y, 0.0, 0.0, False
                 j += 1
                 continue
             e = j + 1
@@ -592,7 +614,7 @@ class SpadChunker:
             span = b - a
             w0 = (starts[j] + 0.5 * gate - a) / span
             dw = bin_s / span
-            yield j, e - j, ya, yb, float(w0), float(dw)
+            yield j, e - j, ya, yb, float(w0), float(dw), True
             j = e
 
 
