@@ -187,17 +187,20 @@ def main(argv=None):
     small = make_timeline(16, 4, args.rate, args.lux)  # warm-up: numba compile / cache load, NumPy first calls
     run_simspad(small, params, args.lux), run_naive(small, params, args.lux)
 
-    def best(fn, *a, **kw):  # the machine is shared: keep the fastest of a few runs for each contender
-        runs = [fn(*a, **kw) for _ in range(args.repeat)]
-        return min(runs, key=lambda r: r[1])
+    def duel(fast, slow):  # the machine may be shared: alternate the contenders, keep each one's fastest run
+        runs_a, runs_b = [], []
+        for _ in range(args.repeat):
+            runs_a.append(fast())
+            runs_b.append(slow())
+        return min(runs_a, key=lambda r: r[1]), min(runs_b, key=lambda r: r[1])
 
-    n_s, sec_s = best(run_simspad, tl, params, args.lux)
-    n_k, sec_k, frames_k = best(run_naive, tl, params, args.lux)
+    (n_s, sec_s), (n_k, sec_k, frames_k) = duel(lambda: run_simspad(tl, params, args.lux),
+                                                lambda: run_naive(tl, params, args.lux))
     # the τ/4 run is long: time a slice of the sequence and report rates
     n_slice = max(3, args.keyframes // 10)
     tl_slice = Timeline.from_arrays(tl.times_s[:n_slice], np.stack([tl.keyframe(i) for i in range(n_slice)]))
-    n_f, sec_f, frames_f = best(run_naive, tl_slice, params, args.lux, substeps=substeps)
-    n_ss, sec_ss = best(run_simspad, tl_slice, params, args.lux)
+    (n_ss, sec_ss), (n_f, sec_f, frames_f) = duel(lambda: run_simspad(tl_slice, params, args.lux),
+                                                  lambda: run_naive(tl_slice, params, args.lux, substeps=substeps))
 
     kf_s = args.keyframes - 1
     print(f"scene: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "

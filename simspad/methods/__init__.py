@@ -6,7 +6,7 @@ name                   label                       what it reads / does (default
 ``nedi_akf``           NEDI+AKF (S+E)              SPAD aggregates at 0.4 kHz (the paper's rate) deblurred by
                                                    NEDI, fused with events by the AKF (:mod:`.akf`)
 ``adaptive_nedi_akf``  Adaptive NEDI+AKF (S+E)     the same, reading a tile's aggregate only when its mean P
-                                                   exceeds (c/2)² (:mod:`.adaptive`)
+                                                   exceeds (c/2)² or a readout would halve it (:mod:`.adaptive`)
 ``akf_fe``             AKF (F+E)                   conventional frames, EDI-deblurred, fused by the AKF
 ``cf``                 CF (E)                      events only, complementary filter, f_cut 0.1 Hz (:mod:`.cf`)
 ``edi``                EDI (F+E)                   event double integral at the nominal threshold (:mod:`.edi`)
