@@ -209,7 +209,7 @@ class DaskExecutor:
         self._cluster = None
         if scheduler:
             try:
-                self.client = Client(scheduler, timeout="20s")
+                self.client = Client(scheduler, timeout="15s")
             except (OSError, TimeoutError) as exc:
                 raise SimSpadError(f"cannot connect to the Dask scheduler ({exc})", field="--scheduler") from None
         else:
@@ -262,15 +262,20 @@ class DaskExecutor:
                 self._cluster.close()
 
 
+def check_executor_options(kind: str, scheduler: str | None, workers: int | None) -> None:
+    """:class:`SimSpadError` for an unknown executor, ``--scheduler`` without dask, or ``--workers`` < 1."""
+    if kind not in ("local", "dask"):
+        raise SimSpadError(f"unknown executor {kind!r} (expected local or dask)", field="--executor")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise SimSpadError(f"must be an integer ≥ 1, got {workers!r}", field="--workers")
+    if scheduler and kind != "dask":
+        raise SimSpadError("--scheduler needs --executor dask", field="--scheduler")
+
+
 def make_executor(kind: str, out_dir: Path, *, scheduler: str | None = None, workers: int | None = None):
     """The executor named ``kind`` (``"local"`` or ``"dask"``)."""
+    check_executor_options(kind, scheduler, workers)
     env = job_environment()
-    if workers is not None and workers < 1:
-        raise SimSpadError(f"must be at least 1, got {workers}", field="--workers")
     if kind == "local":
-        if scheduler:
-            raise SimSpadError("--scheduler needs --executor dask", field="--scheduler")
         return LocalExecutor(out_dir, env, workers)
-    if kind == "dask":
-        return DaskExecutor(out_dir, env, scheduler, workers)
-    raise SimSpadError(f"unknown executor {kind!r} (expected local or dask)", field="--executor")
+    return DaskExecutor(out_dir, env, scheduler, workers)

@@ -337,7 +337,10 @@ def generate(spec, out_dir=None, executor: str = "local", scheduler: str | None 
     """
     from simspad.spec import DatasetSpec, load_spec
 
+    from simspad.executors import check_executor_options
+
     t_start = time.perf_counter()
+    check_executor_options(executor, scheduler, workers)
     if not isinstance(spec, DatasetSpec):
         spec = load_spec(spec)
     out_dir = Path(out_dir if out_dir is not None else spec.output).expanduser().resolve()

@@ -33,10 +33,10 @@ quality-versus-readouts trade-off (events from slow, dim photoreceptors do not d
 
 from __future__ import annotations
 
-import numpy as np
-
 from collections import deque
 from dataclasses import replace
+
+import numpy as np
 
 from simspad.methods.akf import NediAkf, akf_frames, akf_params_for
 from simspad.methods.events_util import EventBatch
@@ -85,7 +85,7 @@ class TilePolicy:
         self.j += 1
         j = self.j
         self.history.append(m)
-        n_win = m.raw_counts is not None and m.raw_bin_t.size
+        n_win = m.raw_bin_t.size  # SPAD windows carry their raw counts and bin times
         start = self._start(j)
         n_acc_tile = (j - start + 1) * n_win
         if first:
@@ -103,7 +103,6 @@ class TilePolicy:
         self.candidates += self.n_tiles
         self.tile_reads += req
         mask = req[self.tile_id]
-        n_pix_acc = n_acc_tile[self.tile_id]
         m_out = self._reaggregate(m, j, start, req) if np.any(req & (start < j)) else m
         self.last_read[req] = j + 1
         if self.tally is not None:

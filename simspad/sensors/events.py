@@ -184,11 +184,38 @@ def _exponential(state):
     return state, -math.log(u)
 
 
+# Acklam's rational approximation of the normal quantile (relative error < 1.2e-9): one uniform per draw and no
+# transcendental call in the central 95 %, where Box-Muller needs a log, a sqrt and a cos for every jitter draw.
+_ACK_A = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02, 1.383577518672690e+02,
+          -3.066479806614716e+01, 2.506628277459239e+00)
+_ACK_B = (-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02, 6.680131188771972e+01,
+          -1.328068155288572e+01)
+_ACK_C = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00, -2.549732539343734e+00,
+          4.374664141464968e+00, 2.938163982698783e+00)
+_ACK_D = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00, 3.754408661907416e+00)
+_ACK_LOW = 0.02425
+
+
+@numba.njit(cache=True, inline="always")
+def _normal_quantile(u):
+    """Standard normal quantile of u in (0, 1) (Acklam)."""
+    a, b, c, d = _ACK_A, _ACK_B, _ACK_C, _ACK_D
+    if u < _ACK_LOW or u > 1.0 - _ACK_LOW:
+        q = math.sqrt(-2.0 * math.log(min(u, 1.0 - u)))
+        z = (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
+            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
+        return z if u < _ACK_LOW else -z
+    q = u - 0.5
+    r = q * q
+    return (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q / \
+        (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1.0)
+
+
 @numba.njit(cache=True, inline="always")
 def _normal(state):
-    state, u1 = _uniform(state)
-    state, u2 = _uniform(state)
-    return state, math.sqrt(-2.0 * math.log(u1)) * math.cos(_TWO_PI * u2)
+    """(new state, z) with z standard normal, from one uniform in the open interval (0, 1)."""
+    state, z = _next_u64(state)
+    return state, _normal_quantile(((z >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0))
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -293,6 +320,9 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
         r_hot = hot_hz[p]
         tol = step_tol * min(theta_on, theta_off)
         max_dlog = min(math.sqrt(8.0 * tol), 0.5)
+        # a step cut by the rule ends at I·(1 ± max_dlog) exactly, so its ln I advances by a per-pixel constant
+        dlog_up = math.log1p(max_dlog)
+        dlog_down = math.log1p(-max_dlog)
         lp = lp_state[p]
         ref = ref_state[p]
         t_ref = tref_state[p]
@@ -300,33 +330,47 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
         hz_shot = hzs_state[p]
         hz_hot = hzh_state[p]
         rs = rng_state[p]
+        ib = max(knot_current[p, 0], _MIN_CURRENT)
+        l_b = math.log(ib)  # ln I at the next knot: one log per pixel and knot, none per internal step
         for j in range(n_knots - 1):
             ta = knot_t[j]
             tb = knot_t[j + 1]
             seg = tb - ta
+            ia = ib
+            l_a = l_b
+            ib = max(knot_current[p, j + 1], _MIN_CURRENT)
+            l_b = math.log(ib) if ib != ia else l_a
             if seg <= 0.0:
                 continue
-            ia = max(knot_current[p, j], _MIN_CURRENT)
-            ib = max(knot_current[p, j + 1], _MIN_CURRENT)
             slope = (ib - ia) / seg
             t = ta
             i_t = ia
-            l_t = math.log(i_t)
+            l_t = l_a
             while t < tb:
                 # internal step: inside a step ln I is taken as linear in time; the chord error of ln of the
                 # linear input, (Δ ln I)²/8, must stay within tol (this also bounds how much τ(I) varies)
                 h = tb - t
+                by_rule = False
                 if slope != 0.0:
-                    h = min(h, max_dlog * i_t / abs(slope))
-                h = max(h, _MIN_STEP_S)
+                    h_rule = max_dlog * i_t / abs(slope)
+                    if h_rule < h:
+                        h = h_rule
+                        by_rule = True
+                if h < _MIN_STEP_S:
+                    h = _MIN_STEP_S
+                    by_rule = False
                 s_b = t + h
                 if s_b >= tb or tb - s_b < 1e-12 * seg:
                     s_b = tb
                     i_e = ib
+                    l_e = l_b
                 else:
                     i_e = ia + slope * (s_b - ta)
+                    if by_rule:
+                        l_e = l_t + (dlog_up if slope > 0.0 else dlog_down)
+                    else:
+                        l_e = math.log(i_e)
                 h = s_b - t
-                l_e = math.log(i_e)
                 i_mid = 0.5 * (i_t + i_e)
                 tau = (i_mid + i_ref) * inv_two_pi_fmax / i_mid
                 k = (l_e - l_t) / h
