@@ -194,3 +194,46 @@ def test_same_seed_same_events_whatever_the_chunking_and_threads(tmp_path):
         np.testing.assert_array_equal(a[key], b[key])
         np.testing.assert_array_equal(a[key], d[key])
     assert a["t"].size != c["t"].size or not np.array_equal(a["t"], c["t"])
+
+
+def test_jitter_draws_are_standard_normal():
+    """The one-uniform normal quantile used for readout jitter: accurate, and its draws pass a KS test."""
+    u = np.concatenate([np.linspace(1e-12, 1 - 1e-12, 20001), [0.02425, 0.97575, 0.5]])
+    z = np.array([events._normal_quantile(v) for v in u])
+    exact = stats.norm.ppf(u)
+    assert np.max(np.abs(z - exact) / np.maximum(1.0, np.abs(exact))) < 2e-9
+
+    @numba.njit
+    def draws(seed, n):
+        out = np.empty(n)
+        s = np.uint64(seed)
+        for i in range(n):
+            s, out[i] = events._normal(s)
+        return out
+
+    x = draws(12345, 200_000)
+    assert stats.kstest(x, "norm").pvalue > 1e-3
+    assert abs(x.mean()) < 5 / np.sqrt(x.size) and abs(x.std() - 1) < 5 / np.sqrt(2 * x.size)
+
+
+def test_overflowing_pixel_block_is_rerun_alone_with_identical_events():
+    """Force the per-block event buffers to overflow in one block only: its rerun gives the same events."""
+    H, W = 32, 32
+    params = EventParams(shot_noise_rate_hz_at_1lux=5.0, hot_pixel_fraction=0.05)
+    times = np.array([0.0, 0.002, 0.004, 0.006])
+    log_y = np.zeros((4, H, W))
+    log_y[:, :8] = np.array([0.0, 4.0, 0.0, 4.0])[:, None, None]  # only the first pixel block is busy
+    current = events.photocurrent_e_s(1e18 * np.exp(log_y), params).reshape(4, H * W)
+    maps = events.draw_pixel_maps(params, (H, W), np.random.default_rng(2))
+    runs = []
+    for cap in (None, 1):
+        sim = events.EventSimulator(params, (H, W), current[0], 0.0, 1e6, maps)
+        if cap is not None:
+            sim._cap = cap  # smallest room: the busy block overflows, the quiet ones do not
+        out = [sim.advance(times, current), sim.finish()]
+        runs.append([np.concatenate([o[i] for o in out]) for i in range(5)])
+    busy = np.count_nonzero(runs[0][2] < H * W // 4)
+    assert busy > 4 * 1024 and runs[0][0].size - busy > 0
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a, b)
+    assert np.all(np.diff(runs[0][1]) >= 0)

@@ -32,8 +32,15 @@ Per pixel (flattened index ``y·W + x``):
   crossing that falls in that window fires when the window ends (if the change still exceeds the threshold).
 
 Randomness: one splitmix64 stream per pixel, seeded from the sensor's ``rng``, so the result does not depend on
-chunking. Events stream out in time chunks, sorted by (µs timestamp, pixel index) with a two-pass counting
-sort; events read out after the recording's end are dropped.
+chunking, on the pixel blocks or on the thread count; jitter draws are normal quantiles of one uniform each
+(Acklam's approximation, relative error < 1.2·10⁻⁹). Events stream out in time chunks, sorted by (µs timestamp,
+pixel index): the kernel emits them in pixel order, so one stable counting sort over µs buckets orders a chunk,
+and a linear merge joins it to the events held back from the previous one; events read out after the
+recording's end are dropped.
+
+Cost: an internal step costs one exp and no log (a step cut by the tolerance rule advances ln I by a per-pixel
+constant; ln I at keyframes is taken once per pixel and keyframe); a crossing costs about two exp (Halley
+iterations); noise processes cost a multiply per step until they fire.
 
 File layout (DESIGN §5): ``/events/t`` int64 µs since the timeline's t = 0 (``time_origin_s = 0``; the same
 base as ``/gt/t``), ``x``, ``y`` uint16, ``p`` uint8 (1 ON, 0 OFF), ``label`` uint8, and ``ms_to_idx[k]`` = index
@@ -219,25 +226,27 @@ def _normal(state):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level):
+def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level, tr_lo):
     """Root of D(x) = level on [lo, hi] where D = a_off + b_slope·x + c·exp(−x/τ) is monotone.
 
-    ``f_lo``, ``f_hi`` are D − level at the ends (opposite signs, or zero). Once the photoreceptor transient
-    ``c·exp(−x/τ)`` has decayed below the tolerance D is linear and the root is closed-form; otherwise Newton
-    steps, kept inside the shrinking bracket (bisection when a step leaves it).
+    ``f_lo``, ``f_hi`` are D − level at the ends (opposite signs, or zero); ``tr_lo`` = c·exp(−lo/τ), the
+    photoreceptor transient at ``lo`` (the caller has it already). Once the transient has decayed below the
+    tolerance D is linear and the root is closed-form; otherwise Halley steps from the secant point, kept inside
+    the shrinking bracket (bisection when a step leaves it). One exp gives D, D' and D'' (cubic convergence),
+    and a step shorter than the tolerance is taken without a further evaluation.
     """
     if f_lo == 0.0:
         return lo
     if f_hi == 0.0:
         return hi
-    e_lo = math.exp(-lo / tau)
-    if abs(c * e_lo) <= _ROOT_TOL_LOG:
+    if abs(tr_lo) <= _ROOT_TOL_LOG:
         return min(max(lo - f_lo / b_slope, lo), hi)
+    inv_tau = 1.0 / tau
     x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
     for _ in range(100):
         if not (lo < x < hi):
             x = 0.5 * (lo + hi)
-        e = c * math.exp(-x / tau)
+        e = c * math.exp(-x * inv_tau)
         f_x = a_off + b_slope * x + e - level
         if abs(f_x) <= _ROOT_TOL_LOG or hi - lo < _ROOT_TOL_S:
             return x
@@ -245,27 +254,39 @@ def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level):
             lo, f_lo = x, f_x
         else:
             hi = x
-        slope = b_slope - e / tau
-        x = x - f_x / slope if slope != 0.0 else 0.5 * (lo + hi)
+        d1 = b_slope - e * inv_tau
+        if d1 == 0.0:
+            x = 0.5 * (lo + hi)
+            continue
+        d2 = e * inv_tau * inv_tau
+        if abs(f_x * d2) <= d1 * d1:  # near the root: Halley (cubic)
+            step = 2.0 * f_x * d1 / (2.0 * d1 * d1 - f_x * d2)
+        else:  # far out on the flat tail Halley creeps by ~2τ a step; Newton overshoots into a bisection
+            step = f_x / d1
+        x = x - step
+        if abs(step) <= _ROOT_TOL_S and lo <= x <= hi:
+            return x
     return x
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _first_crossing(a_off, b_slope, c, tau, x0, h, d0, dh, theta_on, theta_off):
+def _first_crossing(a_off, b_slope, c, tau, x0, h, d0, dh, theta_on, theta_off, tr0, trh):
     """First x in (x0, h] where D(x) = a_off + b_slope·x + c·exp(−x/τ) reaches θ_on or −θ_off.
 
     D has at most one stationary point (D' = b_slope − (c/τ)·exp(−x/τ) is monotone), so [x0, h] splits into at
     most two monotone pieces; the first piece whose far end is beyond a threshold holds the crossing.
+    ``tr0``, ``trh`` are the transient c·exp(−x/τ) at x0 and h: D' has a root inside only if its end values
+    differ in sign, so the log that locates it is taken only then.
     Returns ``(x, polarity)`` or ``(-1, 0)``; requires −θ_off < D(x0) < θ_on.
     """
     xs = -1.0
-    if c != 0.0 and b_slope != 0.0:
+    if c != 0.0 and b_slope != 0.0 and (b_slope - tr0 / tau > 0.0) != (b_slope - trh / tau > 0.0):
         r = b_slope * tau / c
         if r > 0.0:
             x_stat = -tau * math.log(r)
             if x0 < x_stat < h:
                 xs = x_stat
-    lo, f_lo = x0, d0
+    lo, f_lo, tr_lo = x0, d0, tr0
     for piece in range(2):
         if piece == 0 and xs > 0.0:
             hi = xs
@@ -278,11 +299,11 @@ def _first_crossing(a_off, b_slope, c, tau, x0, h, d0, dh, theta_on, theta_off):
             break
         if f_hi >= theta_on:
             return _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo - theta_on, f_hi - theta_on,
-                                   theta_on), 1
+                                   theta_on, tr_lo), 1
         if f_hi <= -theta_off:
             return _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo + theta_off, f_hi + theta_off,
-                                   -theta_off), 0
-        lo, f_lo = hi, f_hi
+                                   -theta_off, tr_lo), 0
+        lo, f_lo, tr_lo = hi, f_hi, b_slope * tau
     return -1.0, 0
 
 
@@ -313,6 +334,7 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
     n_knots = knot_t.size
     n_ev = start
     inv_two_pi_fmax = 1.0 / (_TWO_PI * f_max)
+    two_pi_fmax = _TWO_PI * f_max
     for p in range(p0, p1):
         theta_on = th_on[p]
         theta_off = th_off[p]
@@ -323,6 +345,9 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
         # a step cut by the rule ends at I·(1 ± max_dlog) exactly, so its ln I advances by a per-pixel constant
         dlog_up = math.log1p(max_dlog)
         dlog_down = math.log1p(-max_dlog)
+        # ... and the shot-noise factor I^(−γ/2) by a per-pixel constant factor
+        g_up = math.exp(-0.5 * shot_exp * dlog_up)
+        g_down = math.exp(-0.5 * shot_exp * dlog_down)
         lp = lp_state[p]
         ref = ref_state[p]
         t_ref = tref_state[p]
@@ -332,27 +357,33 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
         rs = rng_state[p]
         ib = max(knot_current[p, 0], _MIN_CURRENT)
         l_b = math.log(ib)  # ln I at the next knot: one log per pixel and knot, none per internal step
+        g_b = math.exp(-0.5 * shot_exp * l_b)  # I^(−γ/2): the shot-noise rate of a step is r₁I₁^γ·g(start)·g(end)
         for j in range(n_knots - 1):
             ta = knot_t[j]
             tb = knot_t[j + 1]
             seg = tb - ta
             ia = ib
             l_a = l_b
+            g_a = g_b
             ib = max(knot_current[p, j + 1], _MIN_CURRENT)
-            l_b = math.log(ib) if ib != ia else l_a
+            if ib != ia:
+                l_b = math.log(ib)
+                g_b = math.exp(-0.5 * shot_exp * l_b)
             if seg <= 0.0:
                 continue
             slope = (ib - ia) / seg
+            inv_abs_slope = 1.0 / abs(slope) if slope != 0.0 else 0.0
             t = ta
             i_t = ia
             l_t = l_a
+            g_t = g_a
             while t < tb:
                 # internal step: inside a step ln I is taken as linear in time; the chord error of ln of the
                 # linear input, (Δ ln I)²/8, must stay within tol (this also bounds how much τ(I) varies)
                 h = tb - t
                 by_rule = False
                 if slope != 0.0:
-                    h_rule = max_dlog * i_t / abs(slope)
+                    h_rule = max_dlog * i_t * inv_abs_slope
                     if h_rule < h:
                         h = h_rule
                         by_rule = True
@@ -364,24 +395,28 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                     s_b = tb
                     i_e = ib
                     l_e = l_b
+                    g_e = g_b
                 else:
                     i_e = ia + slope * (s_b - ta)
-                    if by_rule:
-                        l_e = l_t + (dlog_up if slope > 0.0 else dlog_down)
+                    if by_rule and slope > 0.0:
+                        l_e = l_t + dlog_up
+                        g_e = g_t * g_up
+                    elif by_rule:
+                        l_e = l_t + dlog_down
+                        g_e = g_t * g_down
                     else:
                         l_e = math.log(i_e)
+                        g_e = math.exp(-0.5 * shot_exp * l_e)
                 h = s_b - t
                 i_mid = 0.5 * (i_t + i_e)
-                tau = (i_mid + i_ref) * inv_two_pi_fmax / i_mid
+                # τ = (I + I_ref)/(2π f_max I) and 1/τ from one division
+                q = 1.0 / (i_mid * (i_mid + i_ref))
+                tau = (i_mid + i_ref) * (i_mid + i_ref) * q * inv_two_pi_fmax
+                inv_tau = i_mid * i_mid * q * two_pi_fmax
                 k = (l_e - l_t) / h
-                decay = math.exp(-h / tau)
+                decay = math.exp(-h * inv_tau)
                 lp_e = l_e - k * tau + (lp - l_t + k * tau) * decay
-                r_shot = 0.0
-                if shot_coef > 0.0:  # rate at the step's geometric-mean photocurrent
-                    if shot_exp == 0.5:
-                        r_shot = shot_coef / math.sqrt(math.sqrt(i_t * i_e))
-                    else:
-                        r_shot = shot_coef * math.exp(-shot_exp * 0.5 * (l_t + l_e))
+                r_shot = shot_coef * g_t * g_e  # rate at the step's geometric-mean photocurrent
                 # ---- events inside [t, s_b]. Exact path, x = s − t:  lp(x) = l_t + k·x − k·τ + c·exp(−x/τ);
                 # detector D(x) = lp(x) − ref + ρ·(s − t_ref) = A + B·x + c·exp(−x/τ)
                 c = lp - l_t + k * tau
@@ -404,8 +439,10 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                             break
                     x0 = cur - t
                     a_off = l_t - k * tau - ref + rho * (t - t_ref)
-                    d_cur = a_off + b_slope * x0 + (c if x0 == 0.0 else c * math.exp(-x0 / tau))
-                    d_end = a_off + b_slope * h + c * decay
+                    tr0 = c if x0 == 0.0 else c * math.exp(-x0 * inv_tau)
+                    trh = c * decay
+                    d_cur = a_off + b_slope * x0 + tr0
+                    d_end = a_off + b_slope * h + trh
                     t_sig = np.inf
                     d_sig = d_cur  # detector value at the signal event: lp there = ref + d_sig − ρ·(t − t_ref)
                     pol = 0
@@ -426,20 +463,24 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                             lower = min(d_cur, d_end)
                         if upper >= theta_on or lower <= -theta_off:
                             x_sig, pol = _first_crossing(a_off, b_slope, c, tau, x0, h, d_cur, d_end,
-                                                         theta_on, theta_off)
+                                                         theta_on, theta_off, tr0, trh)
                             if x_sig >= 0.0:
                                 t_sig = t + x_sig
                                 d_sig = theta_on if pol == 1 else -theta_off
-                    t_shot = cur + hz_shot / r_shot if r_shot > 0.0 else np.inf
-                    t_hot = cur + hz_hot / r_hot if r_hot > 0.0 else np.inf
                     kind = 0  # which process fires first: 0 signal, 1 shot noise, 3 hot pixel
                     t_next = t_sig
-                    if t_shot < t_next:
-                        kind = 1
-                        t_next = t_shot
-                    if t_hot < t_next:
-                        kind = 3
-                        t_next = t_hot
+                    # a noise process fires in this step only if its remaining hazard runs out before the
+                    # step's end or the signal event (a multiply, so the division is only paid when it does)
+                    if r_shot * (min(t_next, s_b) - cur) >= hz_shot:
+                        t_shot = cur + hz_shot / r_shot
+                        if t_shot < t_next:
+                            kind = 1
+                            t_next = t_shot
+                    if r_hot * (min(t_next, s_b) - cur) >= hz_hot:
+                        t_hot = cur + hz_hot / r_hot
+                        if t_hot < t_next:
+                            kind = 3
+                            t_next = t_hot
                     if t_next > s_b:
                         dt = s_b - cur
                         hz_shot -= r_shot * dt
@@ -486,6 +527,7 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                 t = s_b
                 i_t = i_e
                 l_t = l_e
+                g_t = g_e
         lp_state[p] = lp
         ref_state[p] = ref
         tref_state[p] = t_ref
@@ -497,42 +539,108 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
 
 
 @numba.njit(cache=True, parallel=True)
-def _simulate_blocks(n_blocks, block_cap, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef,
-                     shot_exp, f_max, i_ref, step_tol, latency, jitter, refractory,
-                     lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state):
-    """Run pixel blocks in parallel, each into its own slice of shared buffers (``block_cap`` events each).
+def _simulate_blocks(pix_lo, pix_hi, starts, limits, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz,
+                     shot_coef, shot_exp, f_max, i_ref, step_tol, latency, jitter, refractory,
+                     lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
+                     buf_t, buf_p, buf_pol, buf_lab):
+    """Run pixel blocks in parallel: block i advances pixels ``pix_lo[i] … pix_hi[i]−1`` and writes its events
+    into the buffers' slice ``[starts[i], limits[i])``.
 
-    Returns the buffers and each block's end index (−1: the block overflowed its slice).
+    Returns each block's end index (−1: the block overflowed its slice).
     """
-    n_pix = knot_current.shape[0]
-    buf_t = np.empty(n_blocks * block_cap, np.float64)
-    buf_p = np.empty(n_blocks * block_cap, np.int64)
-    buf_pol = np.empty(n_blocks * block_cap, np.uint8)
-    buf_lab = np.empty(n_blocks * block_cap, np.uint8)
+    n_blocks = pix_lo.size
     ends = np.empty(n_blocks, np.int64)
     for b in numba.prange(n_blocks):
-        p0 = b * n_pix // n_blocks
-        p1 = (b + 1) * n_pix // n_blocks
-        ends[b] = _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef, shot_exp,
-                              f_max, i_ref, step_tol, latency, jitter, refractory,
+        ends[b] = _run_pixels(pix_lo[b], pix_hi[b], knot_t, knot_current, th_on, th_off, leak_hz, hot_hz,
+                              shot_coef, shot_exp, f_max, i_ref, step_tol, latency, jitter, refractory,
                               lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
-                              buf_t, buf_p, buf_pol, buf_lab, b * block_cap, (b + 1) * block_cap)
-    return buf_t, buf_p, buf_pol, buf_lab, ends
+                              buf_t, buf_p, buf_pol, buf_lab, starts[b], limits[b])
+    return ends
 
 
 @numba.njit(cache=True)
-def _gather(n_blocks, block_cap, ends, buf_t, buf_p, buf_pol, buf_lab):
+def _us_range(starts, ends, buf_t):
+    """(smallest, largest) µs timestamp of the blocks' events (floor of t·10⁶, as :func:`timestamps_us`)."""
+    lo = np.iinfo(np.int64).max
+    hi = np.iinfo(np.int64).min
+    for b in range(starts.size):
+        for i in range(starts[b], ends[b]):
+            u = np.int64(math.floor(buf_t[i] * 1e6))
+            lo = min(lo, u)
+            hi = max(hi, u)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _bucket_blocks(starts, ends, buf_t, buf_p, buf_pol, buf_lab, t_lo, span):
+    """The blocks' events sorted by (µs timestamp, pixel) with one stable counting sort over µs buckets.
+
+    Blocks cover increasing pixel ranges and each pixel's events are in time order, so reading the blocks in
+    order already gives pixel order inside every µs bucket: a single pass suffices.
+    """
+    n = 0
+    for b in range(starts.size):
+        n += ends[b] - starts[b]
+    count = np.zeros(span + 1, np.int64)
+    for b in range(starts.size):
+        for i in range(starts[b], ends[b]):
+            count[np.int64(math.floor(buf_t[i] * 1e6)) - t_lo + 1] += 1
+    for j in range(span):
+        count[j + 1] += count[j]
+    t_s = np.empty(n, np.float64)
+    t_us = np.empty(n, np.int64)
+    pix = np.empty(n, np.int64)
+    pol = np.empty(n, np.uint8)
+    lab = np.empty(n, np.uint8)
+    for b in range(starts.size):
+        for i in range(starts[b], ends[b]):
+            u = np.int64(math.floor(buf_t[i] * 1e6))
+            k = count[u - t_lo]
+            count[u - t_lo] = k + 1
+            t_s[k] = buf_t[i]
+            t_us[k] = u
+            pix[k] = buf_p[i]
+            pol[k] = buf_pol[i]
+            lab[k] = buf_lab[i]
+    return t_s, t_us, pix, pol, lab
+
+
+@numba.njit(cache=True)
+def _merge_sorted(a_t, a_us, a_pix, a_pol, a_lab, b_t, b_us, b_pix, b_pol, b_lab):
+    """Merge two event sets each sorted by (µs, pixel); on a full tie ``a`` (the earlier chunk) comes first."""
+    n = a_t.size + b_t.size
+    t_s = np.empty(n, np.float64)
+    t_us = np.empty(n, np.int64)
+    pix = np.empty(n, np.int64)
+    pol = np.empty(n, np.uint8)
+    lab = np.empty(n, np.uint8)
+    i = 0
+    j = 0
+    for k in range(n):
+        take_a = j >= b_t.size or (i < a_t.size and (a_us[i] < b_us[j] or (a_us[i] == b_us[j]
+                                                                           and a_pix[i] <= b_pix[j])))
+        if take_a:
+            t_s[k], t_us[k], pix[k], pol[k], lab[k] = a_t[i], a_us[i], a_pix[i], a_pol[i], a_lab[i]
+            i += 1
+        else:
+            t_s[k], t_us[k], pix[k], pol[k], lab[k] = b_t[j], b_us[j], b_pix[j], b_pol[j], b_lab[j]
+            j += 1
+    return t_s, t_us, pix, pol, lab
+
+
+@numba.njit(cache=True)
+def _gather(starts, ends, buf_t, buf_p, buf_pol, buf_lab):
     """Concatenate the blocks' events in block (= pixel) order."""
     n = 0
-    for b in range(n_blocks):
-        n += ends[b] - b * block_cap
+    for b in range(starts.size):
+        n += ends[b] - starts[b]
     t = np.empty(n, np.float64)
     pix = np.empty(n, np.int64)
     pol = np.empty(n, np.uint8)
     lab = np.empty(n, np.uint8)
     k = 0
-    for b in range(n_blocks):
-        for i in range(b * block_cap, ends[b]):
+    for b in range(starts.size):
+        for i in range(starts[b], ends[b]):
             t[k] = buf_t[i]
             pix[k] = buf_p[i]
             pol[k] = buf_pol[i]
@@ -541,41 +649,9 @@ def _gather(n_blocks, block_cap, ends, buf_t, buf_p, buf_pol, buf_lab):
     return t, pix, pol, lab
 
 
-@numba.njit(cache=True)
-def _radix_order(t_us, pixel, n_pix, t_lo, span):
-    """Permutation sorting events by (t_us, pixel): two stable counting sorts (pixel, then µs bucket)."""
-    n = t_us.size
-    count = np.zeros(n_pix + 1, np.int64)
-    for i in range(n):
-        count[pixel[i] + 1] += 1
-    for j in range(n_pix):
-        count[j + 1] += count[j]
-    by_pixel = np.empty(n, np.int64)
-    for i in range(n):
-        by_pixel[count[pixel[i]]] = i
-        count[pixel[i]] += 1
-    count = np.zeros(span + 1, np.int64)
-    for i in range(n):
-        count[t_us[i] - t_lo + 1] += 1
-    for j in range(span):
-        count[j + 1] += count[j]
-    order = np.empty(n, np.int64)
-    for i in by_pixel:
-        b = t_us[i] - t_lo
-        order[count[b]] = i
-        count[b] += 1
-    return order
-
-
 def sort_events(t_us: np.ndarray, pixel: np.ndarray, n_pix: int) -> np.ndarray:
     """Permutation that orders events by (µs timestamp, pixel index): the file's canonical order."""
-    if t_us.size == 0:
-        return np.zeros(0, np.int64)
-    t_lo, t_hi = int(t_us.min()), int(t_us.max())
-    span = t_hi - t_lo + 1
-    if span <= 4 * t_us.size + (1 << 20):
-        return _radix_order(t_us, pixel, int(n_pix), t_lo, span)
-    return np.lexsort((pixel, t_us))
+    return np.lexsort((np.asarray(pixel), np.asarray(t_us)))
 
 
 def timestamps_us(t_s: np.ndarray) -> np.ndarray:
@@ -618,7 +694,8 @@ class EventSimulator:
                     self.t_ref, self.t_avail, self.hz_shot, self.hz_hot, float(t0))
         self._pending = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.uint8),
                          np.empty(0, np.uint8))
-        self._cap = max(1 << 16, 4 * n)  # events expected per chunk (adapts; an overflow retries the chunk)
+        self._cap = max(1 << 16, 4 * n)  # events expected per chunk (adapts; an overflowing block is rerun)
+        self._buf = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.uint8))
 
     def advance(self, knot_t: np.ndarray, knot_current: np.ndarray):
         """Run the pieces between ``knot_t`` (m+1 instants) on photocurrents ``[m+1, H·W]``.
@@ -629,41 +706,72 @@ class EventSimulator:
             Events whose µs timestamp lies before the µs holding ``knot_t[-1]``, sorted by (t_us, pixel);
             later ones are held back and merged with the next chunk, so the order does not depend on chunking.
         """
-        t_s, pixel, pol, label = self._run_chunk(np.ascontiguousarray(knot_t, dtype=np.float64),
-                                                 np.ascontiguousarray(np.asarray(knot_current, np.float64).T))
-        new = (t_s, timestamps_us(t_s), pixel, pol, label)
-        merged = tuple(np.concatenate([a, b]) for a, b in zip(self._pending, new))
-        order = sort_events(merged[1], merged[2], self.shape[0] * self.shape[1])
-        merged = tuple(a[order] for a in merged)
+        new = self._run_chunk(np.ascontiguousarray(knot_t, dtype=np.float64),
+                              np.ascontiguousarray(np.asarray(knot_current, np.float64).T))
+        merged = _merge_sorted(*self._pending, *new) if self._pending[0].size else new
         cut = int(np.searchsorted(merged[1], timestamps_us(knot_t[-1]), side="left"))
-        self._pending = tuple(a[cut:] for a in merged)
+        self._pending = tuple(a[cut:].copy() for a in merged)
         return tuple(a[:cut] for a in merged)
 
+    def _buffers(self, size: int):
+        """Event buffers of at least ``size`` rows, kept between chunks (no fresh pages to fault in each time)."""
+        if self._buf[0].size < size:
+            self._buf = (np.empty(size, np.float64), np.empty(size, np.int64), np.empty(size, np.uint8),
+                         np.empty(size, np.uint8))
+        return self._buf
+
     def _run_chunk(self, knot_t, knot_current):
-        """All pixels over one chunk, in parallel pixel blocks; retried with more room if a block overflows
-        (the state is restored first, and per-pixel random streams make the retry identical)."""
+        """All pixels over one chunk, in parallel pixel blocks, sorted by (µs, pixel).
+
+        A block that overflows its buffer slice is rerun alone with more room, after its pixels' state is
+        restored (per-pixel random streams make the rerun identical); the other blocks' results stand.
+        """
         p = self.params
         m = self.maps
         n_pix = knot_current.shape[0]
-        n_blocks = max(1, min(n_pix, 4 * numba.get_num_threads(), -(-n_pix // 256)))
+        n_blocks = max(1, min(n_pix, 16 * numba.get_num_threads(), -(-n_pix // 256)))
+        bounds = np.arange(n_blocks + 1, dtype=np.int64) * n_pix // n_blocks
+        pix_lo, pix_hi = bounds[:-1].copy(), bounds[1:].copy()
+        room = max(1024, -(-2 * self._cap // n_blocks))
+        starts = np.arange(n_blocks, dtype=np.int64) * room
+        limits = starts + room
         state = (self.lp, self.ref, self.t_ref, self.t_avail, self.hz_shot, self.hz_hot, self.rng_state)
-        while True:
-            saved = [a.copy() for a in state]
-            block_cap = max(1024, 2 * self._cap // n_blocks)
-            buf_t, buf_p, buf_pol, buf_lab, ends = _simulate_blocks(
-                n_blocks, block_cap, knot_t, knot_current, m.threshold_on, m.threshold_off, m.leak_rate_hz,
-                m.hot_rate_hz, float(self.shot_coef), float(p.shot_noise_current_exponent),
-                float(p.photoreceptor_cutoff_hz_max), float(p.photoreceptor_cutoff_ref_rate_e_s),
-                float(p.substep_tolerance), float(p.latency_s), float(p.jitter_s),
-                float(p.refractory_s) + _REFRACTORY_GUARD_S, *state)
-            if np.all(ends >= 0):
-                break
-            for a, b in zip(state, saved):
-                a[...] = b
-            self._cap *= 4
-        used = ends - np.arange(n_blocks) * block_cap
-        self._cap = max(1024, int(used.max()) * n_blocks)
-        return _gather(n_blocks, block_cap, ends, buf_t, buf_p, buf_pol, buf_lab)
+        saved = [a.copy() for a in state]
+        args = (knot_t, knot_current, m.threshold_on, m.threshold_off, m.leak_rate_hz, m.hot_rate_hz,
+                float(self.shot_coef), float(p.shot_noise_current_exponent), float(p.photoreceptor_cutoff_hz_max),
+                float(p.photoreceptor_cutoff_ref_rate_e_s), float(p.substep_tolerance), float(p.latency_s),
+                float(p.jitter_s), float(p.refractory_s) + _REFRACTORY_GUARD_S, *state)
+        used_rows = n_blocks * room
+        ends = _simulate_blocks(pix_lo, pix_hi, starts, limits, *args, *self._buffers(used_rows))
+        while np.any(ends < 0):
+            failed = np.flatnonzero(ends < 0)
+            for b in failed:
+                for a, keep in zip(state, saved):
+                    a[pix_lo[b]:pix_hi[b]] = keep[pix_lo[b]:pix_hi[b]]
+            room *= 4
+            new_starts = used_rows + np.arange(failed.size, dtype=np.int64) * room
+            used_rows += failed.size * room
+            if self._buf[0].size < used_rows:  # grow, keeping the blocks already done
+                old = self._buf
+                self._buf = tuple(np.empty(used_rows, a.dtype) for a in old)
+                for a, b in zip(self._buf, old):
+                    a[:b.size] = b
+            ends[failed] = _simulate_blocks(pix_lo[failed], pix_hi[failed], new_starts, new_starts + room,
+                                            *args, *self._buf)
+            starts[failed] = new_starts
+        counts = ends - starts
+        self._cap = max(1024, int(counts.max()) * n_blocks)
+        buf = self._buf
+        if counts.sum() == 0:
+            return tuple(a[:0] for a in self._pending)
+        t_lo, t_hi = _us_range(starts, ends, buf[0])
+        span = t_hi - t_lo + 1
+        if span <= 4 * int(counts.sum()) + (1 << 20):
+            return _bucket_blocks(starts, ends, *buf, t_lo, span)
+        t_s, pixel, pol, label = _gather(starts, ends, *buf)  # sparse events over a long chunk: comparison sort
+        t_us = timestamps_us(t_s)
+        order = sort_events(t_us, pixel, n_pix)
+        return t_s[order], t_us[order], pixel[order], pol[order], label[order]
 
     def finish(self):
         """The events still held back (sorted)."""
