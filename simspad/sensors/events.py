@@ -232,8 +232,9 @@ def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level, tr_lo):
     ``f_lo``, ``f_hi`` are D − level at the ends (opposite signs, or zero); ``tr_lo`` = c·exp(−lo/τ), the
     photoreceptor transient at ``lo`` (the caller has it already). Once the transient has decayed below the
     tolerance D is linear and the root is closed-form; otherwise Halley steps from the secant point, kept inside
-    the shrinking bracket (bisection when a step leaves it). One exp gives D, D' and D'' (cubic convergence),
-    and a step shorter than the tolerance is taken without a further evaluation.
+    the shrinking bracket (bisection when a step leaves it). One exp gives D, D' and D'' (cubic convergence);
+    a step is taken without a further evaluation when it, or its predicted error K·step³ (×10 margin), is
+    below the tolerance.
     """
     if f_lo == 0.0:
         return lo
@@ -259,12 +260,15 @@ def _solve_monotone(a_off, b_slope, c, tau, lo, hi, f_lo, f_hi, level, tr_lo):
             x = 0.5 * (lo + hi)
             continue
         d2 = e * inv_tau * inv_tau
-        if abs(f_x * d2) <= d1 * d1:  # near the root: Halley (cubic)
+        if abs(f_x * d2) <= d1 * d1:  # near the root: Halley, error after the step ≈ K·step³
             step = 2.0 * f_x * d1 / (2.0 * d1 * d1 - f_x * d2)
+            r2 = d2 / d1  # K = (D2/D1)²/4 − D3/(6·D1), and D3 = −D2/τ here
+            err = (0.25 * r2 * r2 + abs(r2 * inv_tau) / 6.0) * abs(step) ** 3
         else:  # far out on the flat tail Halley creeps by ~2τ a step; Newton overshoots into a bisection
             step = f_x / d1
+            err = np.inf
         x = x - step
-        if abs(step) <= _ROOT_TOL_S and lo <= x <= hi:
+        if (abs(step) <= _ROOT_TOL_S or 10.0 * err <= _ROOT_TOL_S) and lo <= x <= hi:
             return x
     return x
 
