@@ -156,10 +156,11 @@ def scenes_from_cli(contact_sheet: Path | None = None) -> None:
 
     scenes = list_scenes()
     width = max((len(s.name) for s in scenes), default=4)
-    for s in scenes:
-        traj = _display_path(s.default_trajectory) if s.default_trajectory else "-"
+    trajs = [_display_path(s.default_trajectory) if s.default_trajectory else "-" for s in scenes]
+    traj_width = max((len(t) for t in trajs), default=1)
+    for s, traj in zip(scenes, trajs):
         objs = f"  [animated: {', '.join(s.objects)}]" if s.objects else ""
-        click.echo(f"{s.name:<{width}}  {traj:<28}  {s.description}{objs}")
+        click.echo(f"{s.name:<{width}}  {traj:<{traj_width}}  {s.description}{objs}")
     if contact_sheet is not None:
         from simspad.scene_assets.contact_sheet import write_contact_sheet
 

@@ -84,3 +84,28 @@ def test_nedi_solves_the_expected_count_equation_exactly():
     a = np.exp(0.5 * (np.array([-1, 0, 1, 2])[seg]))
     expected = (-np.expm1(-(Q_M2 * phi.reshape(-1, 1) * a + 1e3) * BIN_S)).sum(axis=1)
     assert np.allclose(expected, np.minimum(counts.reshape(-1), 243), rtol=1e-8)
+
+
+def test_low_count_update_is_unbiased_where_floored_logs_are_not():
+    """Sequential posterior updates from sparse aggregates (0.3 expected ones each) converge to the truth."""
+    from simspad.methods.nedi import laplace_update
+    from simspad.methods.spad_response import floor_flux
+
+    rng = np.random.default_rng(5)
+    n_pix, n_bins, windows = 400, 244, 300
+    mu = 0.3  # expected ones per aggregate
+    phi = -np.log1p(-mu / n_bins) / (Q_M2 * BIN_S)
+    floor = floor_flux(n_bins, Q_M2, BIN_S)
+    u = np.full(n_pix, np.log(floor))
+    P = np.full(n_pix, 2.0)
+    logs = []
+    for _ in range(windows):
+        S = rng.binomial(n_bins, mu / n_bins, n_pix)
+        low, u_eq, var_eq = laplace_update(S, n_bins, Q_M2, BIN_S, 0.0, u, P)
+        assert low.all()
+        post_P = 1.0 / (1.0 / P + 1.0 / var_eq)
+        u = post_P * (u / P + u_eq / var_eq)  # the Gaussian fusion the filter's relaxation performs
+        P = post_P
+        logs.append(np.log(np.maximum(estimate_flux(S, n_bins, Q_M2, BIN_S), floor)))
+    assert abs(np.mean(np.exp(u)) / phi - 1) < 0.1
+    assert np.exp(np.mean(logs)) / phi > 1.5  # the floored log average: biased high

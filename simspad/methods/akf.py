@@ -29,6 +29,10 @@ information over its period.
 The measurement variance is evaluated at the filter's *predicted* irradiance (``Measurement.var_log_predicted``):
 weights computed from a measurement's own value favour high photon-count draws and bias the fused estimate up.
 
+Dim pixels: an aggregate with fewer than ``LOW_COUNT`` (10) ones is fed as the equivalent Gaussian measurement of
+its exact Bernoulli likelihood around the filter's prediction (:func:`simspad.methods.nedi.laplace_update`), not
+as a floored ln Φ̂: on the office scene at 1 lx, dark regions came out ≈ 3× too bright without it.
+
 Covariance matching (:func:`inflate_by_innovation`): at each new frame, P is scaled up where the 3×3-pooled
 innovations exceed P + R. Events that never fired (a photoreceptor too slow for the motion in dim light) add no Q,
 so without this the filter keeps trusting a stale state and compresses contrast: on the rotating Siemens star at
@@ -217,8 +221,14 @@ def akf_frames(measurements: Iterable[Measurement], times_s: np.ndarray, shape: 
         elif tally is not None:
             tally.add(1.0, m.readout_bits)
         var = m.var_log if first else m.var_log_predicted(np.exp(st.L + m.level_ref))
-        rinv = 1.0 / (var * m.duration_s)
         lf = m.log_flux_at_start()
+        if m.low_count_update is not None:  # also at the first frame: its prior is then the floor, P = its var
+            low, u_eq, var_eq = m.low_count_update(st.L + m.level_ref, st.P)
+            if low.any():
+                var = var.copy()
+                var[low] = var_eq
+                lf[low] = u_eq - m.level_ref[low]
+        rinv = 1.0 / (var * m.duration_s)
         if not first and params.innovation_window_px > 0:
             inflate_by_innovation(st, lf, var, mask, params.innovation_window_px, params.max_inflation)
         st.set_measurement(lf, rinv, mask)

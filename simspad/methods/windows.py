@@ -63,6 +63,9 @@ class Measurement:
     raw_counts: np.ndarray | None = None
     """SPAD windows only: the ones per pixel [N] and the bins' sampling instants, for re-aggregation."""
     raw_bin_t: np.ndarray | None = None
+    low_count_update: Callable | None = None
+    """SPAD windows only: ``(u_pred, P) -> (mask, u_eq, var_eq)``, the equivalent Gaussian measurement of ln Φ(f)
+    for pixels with few counts, where ln Φ̂ is not Gaussian (see :func:`simspad.methods.nedi.laplace_update`)."""
 
     def var_log_predicted(self, flux_pred: np.ndarray) -> np.ndarray:
         """Var(ln Φ̂) at the predicted irradiance, keeping the measurement's own structure (events in the window)
