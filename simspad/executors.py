@@ -165,7 +165,7 @@ class LocalExecutor:
         return self._sim_pool.submit(run_simulation, task, self.out_dir, self.env)
 
     def sim_slots(self, renders_running: int) -> int:
-        return max(1, self.workers - 1) if renders_running else self.workers
+        return int(os.environ.get("SIMSPAD_SLOTS_DURING_RENDER", max(1, self.workers - 1))) if renders_running else self.workers
 
     @staticmethod
     def wait(futures):
