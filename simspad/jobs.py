@@ -418,7 +418,9 @@ def _run(out_dir: Path, plan: Plan, manifest: _Manifest, executor_kind, schedule
     if not todo:
         return outcome
 
-    ex = make_executor(executor_kind, out_dir, scheduler=scheduler, workers=workers)
+    render_mp_spp = max((r.sequence.resolution[0] * r.sequence.resolution[1] * r.sequence.spp / 1e6
+                         for r in renders), default=0.0)
+    ex = make_executor(executor_kind, out_dir, scheduler=scheduler, workers=workers, render_mp_spp=render_mp_spp)
     outcome.executor = ex.describe()
     bar_r = tqdm(total=len(renders), desc="renders", unit="seq", disable=not progress or not renders, position=0,
                  leave=True, dynamic_ncols=True)

@@ -86,13 +86,16 @@ def build_board(results_dirs) -> Board:
     for r in rows:
         m = info.setdefault(r["method"], {"label": r.get("label") or r["method"], "sensors": r.get("sensors", ""),
                                           "absolute_scale": r.get("absolute_scale", True), "bw_khz": [],
-                                          "bw_bits": [], "psnr": [], "ssim": [], "errors": []})
+                                          "bw_bits": [], "psnr": [], "ssim": [], "errors": [],
+                                          "bw_khz_by_lux": defaultdict(list), "bw_bits_by_lux": defaultdict(list)})
         if r.get("error"):
             m["errors"].append(r["error"])
             continue
         per_cell[(r["method"], r["scene"], float(r["lux"]))].append(r["psnr_db"])
         m["bw_khz"].append(r.get("bandwidth_khz_per_pixel", float("nan")))
         m["bw_bits"].append(r.get("bandwidth_bits_per_pixel_s", float("nan")))
+        m["bw_khz_by_lux"][float(r["lux"])].append(r.get("bandwidth_khz_per_pixel", float("nan")))
+        m["bw_bits_by_lux"][float(r["lux"])].append(r.get("bandwidth_bits_per_pixel_s", float("nan")))
         m["psnr"].append(r["psnr_db"])
         m["ssim"].append(r.get("ssim", float("nan")))
     psnr = {k: _mean(v) for k, v in per_cell.items()}
@@ -146,23 +149,49 @@ def _lux_means(board: Board) -> dict[str, dict[float, float]]:
 
 # -- tables -----------------------------------------------------------------------------------------------------
 
-def table_cells(board: Board):
-    """Header and body of the main table as (text, is_best) cells; text unescaped."""
-    header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s"] + \
-        [f"{s} @ {l:g} lx" for s, l in board.columns] + ["Mean PSNR"]
-    best_cols = [_best({m: board.psnr.get((m, s, l), float("nan")) for m in board.methods})
-                 for s, l in board.columns]
-    best_bw = _best({m: board.info[m]["bw_khz_mean"] for m in board.methods}, higher=False)
-    best_bits = _best({m: board.info[m]["bw_bits_mean"] for m in board.methods}, higher=False)
-    best_mean = _best({m: board.info[m]["psnr_mean"] for m in board.methods})
+def summary_cells(board: Board):
+    """The summary table: each method's bandwidth and mean PSNR / SSIM over all recordings."""
+    header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s", "Mean PSNR (dB)", "Mean SSIM"]
+    best = [_best({m: board.info[m][k] for m in board.methods}, higher=h)
+            for k, h in (("bw_khz_mean", False), ("bw_bits_mean", False), ("psnr_mean", True), ("ssim_mean", True))]
     body = []
     for m in board.methods:
         i = board.info[m]
-        cells = [(_label(board, m), False), (i["sensors"], False), (_bw(i["bw_khz_mean"]), m in best_bw),
-                 (_bw(i["bw_bits_mean"]), m in best_bits)]
-        cells += [(_f(board.psnr.get((m, s, l), float("nan"))), m in best_cols[j])
-                  for j, (s, l) in enumerate(board.columns)]
-        cells.append((_f(i["psnr_mean"]), m in best_mean))
+        body.append([(_label(board, m), False), (i["sensors"], False), (_bw(i["bw_khz_mean"]), m in best[0]),
+                     (_bw(i["bw_bits_mean"]), m in best[1]), (_f(i["psnr_mean"]), m in best[2]),
+                     (_f(i["ssim_mean"], 3), m in best[3])])
+    return header, body
+
+
+def table_cells(board: Board, lux: float | None = None):
+    """Methods × scenes (PSNR, dB) with bandwidth, at one light level (``lux``) or over all (scene, lux) columns.
+
+    Cells are (text, is_best) with the text unescaped; best = highest PSNR, lowest bandwidth.
+    """
+    columns = [(s, l) for s, l in board.columns if lux is None or l == lux]
+    bw_key = "bw_khz_by_lux" if lux is not None else None
+
+    def bandwidth(m, kind):
+        i = board.info[m]
+        if lux is None:
+            return i["bw_khz_mean"] if kind == "khz" else i["bw_bits_mean"]
+        return _mean(i[bw_key if kind == "khz" else "bw_bits_by_lux"].get(lux, []))
+
+    def mean_psnr(m):
+        return _mean([board.psnr.get((m, s, l), float("nan")) for s, l in columns])
+
+    header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s"] + \
+        [s if lux is not None else f"{s} @ {l:g} lx" for s, l in columns] + ["Mean PSNR"]
+    best_cols = [_best({m: board.psnr.get((m, s, l), float("nan")) for m in board.methods}) for s, l in columns]
+    best_bw = _best({m: bandwidth(m, "khz") for m in board.methods}, higher=False)
+    best_bits = _best({m: bandwidth(m, "bits") for m in board.methods}, higher=False)
+    best_mean = _best({m: mean_psnr(m) for m in board.methods})
+    body = []
+    for m in board.methods:
+        cells = [(_label(board, m), False), (board.info[m]["sensors"], False),
+                 (_bw(bandwidth(m, "khz")), m in best_bw), (_bw(bandwidth(m, "bits")), m in best_bits)]
+        cells += [(_f(board.psnr.get((m, s, l), float("nan"))), m in best_cols[j]) for j, (s, l) in enumerate(columns)]
+        cells.append((_f(mean_psnr(m)), m in best_mean))
         body.append(cells)
     return header, body
 
@@ -363,7 +392,6 @@ def _errors(board: Board) -> list[tuple[str, str]]:
 
 
 def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, bytes]]) -> str:
-    header, body = table_cells(board)
     lheader, lbody = lux_table(board)
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              "<title>SimSPAD leaderboard</title>", f"<style>{_CSS}</style></head><body>",
@@ -371,9 +399,11 @@ def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, b
              "<p class=\"note\">PSNR in dB (display-mapped: white point = 99th percentile of ground truth, sRGB "
              f"curve; DESIGN §8). Best per column in bold. {DAGGER} scored after a per-frame least-squares "
              "affine fit in log space (no absolute scale). Bandwidth: mean over recordings.</p>",
-             "<h2>Methods × scenes × lux (PSNR, dB)</h2>", _html_table(header, body),
+             "<h2>Summary over all recordings</h2>", _html_table(*summary_cells(board)),
              "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody),
-             ]
+             "<h2>Methods × scenes at each light level (PSNR, dB)</h2>"]
+    for lux in _lux_levels(board):
+        parts += [f"<h3>{lux:g} lx</h3>", _html_table(*table_cells(board, lux))]
     mt = mtf_table(board)
     if mt is not None:
         parts += ["<h2>Siemens star: MTF50</h2>", f"<p class=\"note\">{html.escape(MTF_NOTE)}</p>", _html_table(*mt)]
@@ -392,13 +422,15 @@ def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, b
 
 
 def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[tuple[str, str]]) -> str:
-    header, body = table_cells(board)
     lheader, lbody = lux_table(board)
     out = ["# SimSPAD leaderboard", "",
            f"PSNR in dB (DESIGN §8 display mapping). Best per column in bold. {DAGGER}: scored after a per-frame "
            "least-squares affine fit in log space (no absolute scale). Bandwidth: mean over recordings.", "",
-           "## Methods × scenes × lux (PSNR, dB)", "", _md_table(header, body), "",
-           "## Mean PSNR per light level (dB)", "", _md_table(lheader, lbody, 1), ""]
+           "## Summary over all recordings", "", _md_table(*summary_cells(board)), "",
+           "## Mean PSNR per light level (dB)", "", _md_table(lheader, lbody, 1), "",
+           "## Methods × scenes at each light level (PSNR, dB)", ""]
+    for lux in _lux_levels(board):
+        out += [f"### {lux:g} lx", "", _md_table(*table_cells(board, lux)), ""]
     mt = mtf_table(board)
     if mt is not None:
         out += ["## Siemens star: MTF50", "", _md_escape(MTF_NOTE), "", _md_table(*mt, 1), ""]
