@@ -298,6 +298,7 @@ class NEDI(Method):
     sensors = "S+E"
     requires = ("spad", "events")
     absolute_scale = True
+    use_events = True
 
     def __init__(self, aggregate_hz: float = DEFAULT_AGGREGATE_HZ, n_bins: int | None = None):
         self.aggregate_hz = aggregate_hz
@@ -306,5 +307,5 @@ class NEDI(Method):
     def _run(self, rec, times_s, tally):
         n = aggregate_bins(rec, self.aggregate_hz, self.n_bins)
         until = float(times_s[-1]) + 1e-9 if times_s.size else 0.0
-        meas = spad_measurements(rec, n, use_events=True, until_s=until, tally=tally)
+        meas = spad_measurements(rec, n, use_events=self.use_events, until_s=until, tally=tally)
         yield from open_loop_frames(meas, times_s, (int(rec.height), int(rec.width)), tally)
