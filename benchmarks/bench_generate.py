@@ -163,14 +163,17 @@ def part_units(spec, tmp: Path) -> dict:
         res = (w0 * scale, h0 * scale)
         summ = _render(seq, tmp / f"render_{scale}", res, dur)
         pts.append((res[0] * res[1] / 1e6 * seq.spp, summ.render_s / max(summ.n_rendered, 1), summ.n_keyframes,
-                    res[0]))
+                    res[0], summ.max_predicted_flow_px))
         print(f"    render {res[0]}×{res[1]} {seq.spp} spp: {summ.n_keyframes} keyframes in {dur * 1e3:.0f} ms, "
               f"{summ.render_s / max(summ.n_rendered, 1) * 1e3:.1f} ms per keyframe")
-    (x1, y1, _, _), (x2, y2, n_kf2, w2) = pts
+    (x1, y1, *_), (x2, y2, n_kf2, w2, flow2) = pts
     b = max((y2 - y1) / (x2 - x1), 0.0)
     a = max(y1 - b * x1, 0.0)
-    u = {"render_a_s": a, "render_b_s": b, "kf_per_s_per_px_width": n_kf2 / dur / w2}
-    print(f"    render      {a * 1e3:.3g} ms + {b:.4g} s per MP·spp, per keyframe")
+    # Image speed (px/s per px of width): the largest step's flow over the step length bounds it from above.
+    speed = flow2 * max(n_kf2 - 1, 1) / dur / w2
+    u = {"render_a_s": a, "render_b_s": b, "speed_px_s_per_px_width": speed, "max_flow_px": seq.max_flow_px}
+    print(f"    render      {a * 1e3:.3g} ms + {b:.4g} s per MP·spp, per keyframe; image speed ≤ "
+          f"{speed * w2:.4g} px/s at {w2} px")
 
     params = {k: s.params for k, s in spec.sensors.items()}
     rdir = tmp / "render_2"
@@ -216,7 +219,6 @@ def part_units(spec, tmp: Path) -> dict:
               f"{u['events_per_mp_s'] / 1e6:.3g} Mevents per MP·s, {sum(ev_t) / max(sum(ev_n), 1) * 1e6:.3g} s per Mevent)")
     u["gt_s_per_mp_frame"] = max(gt_marg, 1e-9) / (mp * (full - half) * 1000.0)
     print(f"    gt          {u['gt_s_per_mp_frame']:.4g} s per MP·frame ({t_gt[1]:.2f} s incl. fixed costs)")
-    u["bench_width"] = w
     return u
 
 
@@ -226,14 +228,16 @@ def part_estimate(u: dict, paper_path: Path, cluster_workers: list[int], cores_p
     paper = load_spec(paper_path)
     cores = default_workers()
     print(f"\n[4] estimate for {paper_path} ({len(paper.sequences)} sequences × {len(paper.lux)} lux)")
-    render_cpu, sim_cpu, sim_each, size = [], 0.0, [], 0
+    render_cpu, sim_cpu, sim_each, size, kf_rates = [], 0.0, [], 0, []
     spad = paper.sensors.get("spad")
     frames = paper.sensors.get("frames")
     for s in paper.sequences:
         w, h = s.resolution
         mp = w * h / 1e6
-        # Keyframes: flow-limited (image motion in pixels scales with width) or the minimum rate, whichever is more.
-        n_kf = max(s.min_rate_hz * s.duration_s, u["kf_per_s_per_px_width"] * w * s.duration_s) + 1
+        # Keyframes: flow-limited (image speed in px/s scales with width) or the minimum rate, whichever is more.
+        kf_rate = max(s.min_rate_hz, u["speed_px_s_per_px_width"] * w / s.max_flow_px)
+        kf_rates.append(kf_rate)
+        n_kf = kf_rate * s.duration_s + 1
         render_wall_here = n_kf * (u["render_a_s"] + u["render_b_s"] * mp * s.spp)
         render_cpu.append(render_wall_here * cores)
         for _ in paper.lux:
@@ -248,20 +252,22 @@ def part_estimate(u: dict, paper_path: Path, cluster_workers: list[int], cores_p
                 t += u["frames_s_per_mp_frame"] * k * mp
                 size += k * w * h * 2
             if "events" in paper.sensors:
-                # the per-pixel event rate grows with image-plane speed, i.e. with width at a fixed field of view
-                scale = w / u["bench_width"]
+                # Per-pixel event rate to first order does not depend on resolution (edge length in px and
+                # image speed in px/s both grow with width, the pixel count with its square).
                 t += u["events_s_per_mp_s"] * mp * s.duration_s
-                size += int(u["events_per_mp_s"] * scale * mp * s.duration_s * 14)
+                size += int(u["events_per_mp_s"] * mp * s.duration_s * 14)
             size += int(paper.evaluation.rate_hz * s.duration_s) * w * h * 4
             sim_each.append(t)
             sim_cpu += t
     n_rec = len(sim_each)
     local_wall = sum(c / cores for c in render_cpu) + sim_cpu / cores
-    print(f"    renders     {sum(render_cpu) / 3600:8.2f} CPU-h  (≈ {u['kf_per_s_per_px_width'] * 512:.0f} keyframes/s "
-          f"at 512 px width, {paper.sequences[0].spp} spp)")
+    print(f"    renders     {sum(render_cpu) / 3600:8.2f} CPU-h  (≈ {max(kf_rates):.0f} keyframes/s at "
+          f"{paper.sequences[0].resolution[0]} px width, {paper.sequences[0].spp} spp; scene of the mini's first "
+          "sequence)")
     print(f"    simulations {sim_cpu / 3600:8.2f} CPU-h  ({n_rec} recordings, longest {max(sim_each) / 60:.1f} min)")
     print(f"    size        {size / GIB:8.1f} GiB (SPAD, frames, gt exact; events from the measured rate)")
     print(f"    this machine ({cores} cores): ≈ {local_wall / 3600:.2f} h")
+    print("    (one render task per sequence: renders spread over at most as many nodes as there are sequences)")
     for n in cluster_workers:
         nodes = max(1, n // cores_per_node)
         waves = math.ceil(len(render_cpu) / nodes)

@@ -19,7 +19,7 @@ import pytest
 
 from simspad.errors import InputError, SimSpadError
 from simspad.jobs import DatasetLock, generate, recording_rel_path
-from simspad.manifest import file_sha256, read_manifest
+from simspad.manifest import content_sha256, file_sha256, read_manifest
 from simspad.spec import load_spec
 
 CREATED = "2025-01-01T00:00:00Z"
@@ -67,6 +67,12 @@ rate_hz = 1000
 def _stat(out: Path, rel: str) -> tuple[int, int]:
     st = (out / rel).stat()
     return st.st_ino, st.st_mtime_ns
+
+
+def _renders_digest(out: Path) -> dict[str, str]:
+    """sha256 of every keyframe file of every render (timeline.json aside: it names the frames by cache key)."""
+    return {str(p.relative_to(out / "renders")).split("-", 1)[0] + "/" + p.name.split("-", 1)[0]: file_sha256(p)
+            for p in sorted((out / "renders").rglob("*.exr"))}
 
 
 def _temporaries(out: Path) -> list[Path]:
@@ -119,10 +125,11 @@ def test_rerun_is_a_no_op(tiny):
     assert {p: _stat(out, p) for p in before} == before
 
 
-def test_dask_is_bit_identical_to_local(tiny):
+def test_dask_is_identical_to_local(tiny):
     """Joining a running Dask scheduler by address (as on a cluster; here a real LocalCluster of 2 single-threaded
-    worker processes): every recording's sha256 equals the local executor's. (The LocalCluster that `generate`
-    starts itself runs in test_spec_change_redoes_only_what_changed.)"""
+    worker processes): every render keyframe is byte-identical and every recording has the same content as the
+    local executor's. (The LocalCluster that `generate` starts itself runs in
+    test_spec_change_redoes_only_what_changed.)"""
     from distributed import LocalCluster
 
     root, spec_path, out, _ = tiny
@@ -132,9 +139,14 @@ def test_dask_is_bit_identical_to_local(tiny):
         generate(load_spec(spec_path), root / "dask", executor="dask", scheduler=cluster.scheduler_address,
                  progress=False, created_utc=CREATED)
     m = read_manifest(root / "dask")
-    assert {e["path"]: e["sha256"] for e in m["recordings"]} == local
+    assert [e["path"] for e in m["recordings"]] == list(local)
     for e in m["recordings"]:
         assert file_sha256(root / "dask" / e["path"]) == e["sha256"]
+        # Same content (every dataset value and attribute, created_utc included), compared by content hash:
+        # the file bytes are equal too in most runs, but the HDF5 library has been seen to place one object
+        # differently in a Dask worker (same content, 56 bytes longer), so bytes are not asserted here.
+        assert content_sha256(root / "dask" / e["path"]) == content_sha256(out / e["path"])
+    assert _renders_digest(root / "dask") == _renders_digest(out)
     with pytest.raises(SimSpadError, match="--scheduler"):
         generate(load_spec(spec_path), root / "bad", executor="local", scheduler="tcp://127.0.0.1:1", progress=False)
 
