@@ -69,3 +69,20 @@ def test_foreign_and_corrupt_files_are_refused(tmp_path):
         del f["spad/dcr_cps"]
     with pytest.raises(InputError, match=r"/spad/dcr_cps: dataset missing"):
         open_recording(tmp_path / "ok.h5")
+
+
+def test_file_bytes_do_not_depend_on_how_rows_are_batched(tmp_path):
+    rows = np.arange(10_000, dtype=np.int64)
+    digests = set()
+    for name, cuts in (("one.h5", [10_000]), ("many.h5", [1, 999, 4000, 3, 4997]), ("even.h5", [2500] * 4)):
+        with RecordingWriter(tmp_path / name, {"width": 1, "height": 1, "duration_s": 1.0, "lux": 1.0}) as w:
+            app = w.append_dataset("events/t", (), np.int64, chunk_rows=1024)
+            i = 0
+            for c in cuts:
+                app.append(rows[i:i + c])
+                i += c
+            assert app.n == rows.size
+        with h5py.File(tmp_path / name) as f:
+            np.testing.assert_array_equal(f["events/t"][()], rows)
+        digests.add(hashlib.sha256((tmp_path / name).read_bytes()).hexdigest())
+    assert len(digests) == 1

@@ -44,23 +44,53 @@ def _attr_value(value):
 
 
 class Appender:
-    """A resizable dataset grown along axis 0 by :meth:`append`."""
+    """A resizable dataset grown along axis 0 by :meth:`append`.
+
+    Rows are buffered and written one whole HDF5 chunk per resize, so the sequence of HDF5 operations (and with
+    it the file's byte layout) depends only on the rows appended, never on how callers batch them: the same
+    data gives the same bytes whatever the chunking, thread count or executor of the simulator.
+    """
 
     def __init__(self, dataset: h5py.Dataset):
         self.dataset = dataset
+        self.chunk_rows = int(dataset.chunks[0])
         self.n = dataset.shape[0]
+        self._written = self.n
+        self._pending: list[np.ndarray] = []
+        self._pending_rows = 0
 
     def append(self, data) -> None:
         """Append rows (``data.shape[1:]`` must equal the dataset's tail shape)."""
         data = np.asarray(data, dtype=self.dataset.dtype)
         if data.shape[1:] != self.dataset.shape[1:]:
             raise ValueError(f"{self.dataset.name}: rows of shape {data.shape[1:]}, expected {self.dataset.shape[1:]}")
-        m = data.shape[0]
-        if m == 0:
+        if data.shape[0] == 0:
             return
-        self.dataset.resize(self.n + m, axis=0)
-        self.dataset[self.n : self.n + m] = data
-        self.n += m
+        self._pending.append(data)
+        self._pending_rows += data.shape[0]
+        self.n += data.shape[0]
+        if self._pending_rows >= self.chunk_rows:
+            self._write(final=False)
+
+    def flush(self) -> None:
+        """Write every buffered row (called by :class:`RecordingWriter` before closing)."""
+        self._write(final=True)
+
+    def _write(self, final: bool) -> None:
+        if not self._pending:
+            return
+        rows = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
+        step = self.chunk_rows
+        full = (rows.shape[0] // step) * step
+        end = rows.shape[0] if final else full
+        for i in range(0, end, step):
+            block = rows[i : min(i + step, end)]
+            self.dataset.resize(self._written + block.shape[0], axis=0)
+            self.dataset[self._written : self._written + block.shape[0]] = block
+            self._written += block.shape[0]
+        rest = rows[end:]
+        self._pending = [rest] if rest.shape[0] else []
+        self._pending_rows = rest.shape[0]
 
 
 class RecordingWriter:
@@ -85,6 +115,7 @@ class RecordingWriter:
         self.attrs = dict(attrs or {})
         self.tmp_path: Path | None = None
         self.h5: h5py.File | None = None
+        self._appenders: list[Appender] = []
 
     def __enter__(self) -> "RecordingWriter":
         ensure_writable_dir(self.path.parent)
@@ -94,6 +125,14 @@ class RecordingWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                for appender in self._appenders:
+                    appender.flush()
+        finally:
+            self._close(exc_type)
+
+    def _close(self, exc_type) -> None:
         try:
             self.h5.close()
         finally:
@@ -125,7 +164,9 @@ class RecordingWriter:
                                     track_times=False)
         for key, value in (attrs or {}).items():
             ds.attrs[key] = _attr_value(value)
-        return Appender(ds)
+        appender = Appender(ds)
+        self._appenders.append(appender)
+        return appender
 
 
 def _decode(value):

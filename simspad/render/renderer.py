@@ -211,6 +211,33 @@ def _check_span(ts, source: str, start_s: float, end_s: float) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------- Mitsuba
+_MAX_SCENE_LOADS = 64
+
+
+def _emitter_order(scene) -> list[str]:
+    return [(e.get_shape().id() if e.get_shape() is not None else e.id()) for e in scene.emitters()]
+
+
+def _load_canonical(mi, source, where):
+    """Load a scene whose emitters are listed in a canonical order (sorted by id).
+
+    Mitsuba 3.9 lists a scene's emitters (and shapes) in an order that varies from one load to the next, even
+    with ``parallel=False``; emitter sampling picks by index, so a fixed render seed would then give different
+    Monte Carlo noise in different processes and the dataset would not be bit-identical across runs. A load
+    costs ~0.1 s, so reload until the order is the sorted one; warn once if that order never comes up.
+    """
+    for _ in range(_MAX_SCENE_LOADS):
+        scene = mi.load_dict(source, parallel=False) if isinstance(source, dict) else mi.load_file(
+            str(source), parallel=False)
+        order = _emitter_order(scene)
+        if order == sorted(order):
+            return scene
+    print(f"simspad: warning: {where}: Mitsuba did not list the scene's emitters in a stable order in "
+          f"{_MAX_SCENE_LOADS} loads; renders of this scene may differ in Monte Carlo noise between runs",
+          file=sys.stderr)
+    return scene
+
+
 class _MitsubaScene:
     """A loaded scene, our own sensor, and the parameters that move the camera and the objects."""
 
@@ -223,7 +250,7 @@ class _MitsubaScene:
         where = info.source or info.folder
         source = scene_dict_or_file(info)
         try:
-            self.scene = mi.load_dict(source) if isinstance(source, dict) else mi.load_file(str(source))
+            self.scene = _load_canonical(mi, source, where)
         except Exception as exc:  # Mitsuba reports malformed scenes as RuntimeError with its own message
             raise SimSpadError(f"Mitsuba cannot load the scene: {str(exc).splitlines()[0]}", path=where,
                                field="scene") from None
