@@ -92,8 +92,9 @@ def match_tiles(ref, img, tile, radius, init_dy, init_dx, l2, out_dy, out_dx, co
 
 
 def _parabola(c: np.ndarray) -> np.ndarray:
-    den = c[..., 0] - 2.0 * c[..., 1] + c[..., 2]
+    # Costs of candidates outside the image are inf: inf − inf gives NaN, masked out just below.
     with np.errstate(invalid="ignore", divide="ignore"):
+        den = c[..., 0] - 2.0 * c[..., 1] + c[..., 2]
         off = np.where(np.isfinite(den) & (den > 0), 0.5 * (c[..., 0] - c[..., 2]) / den, 0.0)
     return np.clip(np.nan_to_num(off), -0.5, 0.5)
 
