@@ -15,6 +15,7 @@ per second; a method's bandwidth is the sum over the sensors it reads:
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
@@ -100,7 +101,7 @@ class Reconstruction:
         return self._tally.result()
 
 
-class Method:
+class Method(abc.ABC):
     """Base class of a reconstruction method.
 
     Subclasses set the class attributes and implement :meth:`_run`, a generator yielding one ``[H, W]`` flux
@@ -141,8 +142,9 @@ class Method:
         tally = BandwidthTally()
         return Reconstruction(self._run(rec, times, tally), tally, int(times.size))
 
-    def _run(self, rec, times_s: np.ndarray, tally: BandwidthTally) -> Iterable[np.ndarray]:  # pragma: no cover
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _run(self, rec, times_s: np.ndarray, tally: BandwidthTally) -> Iterable[np.ndarray]:
+        """Yield the reconstructions at ``times_s`` in order, adding what is read to ``tally``."""
 
     def __repr__(self) -> str:
         return f"<Method {self.name}: {self.label}>"
