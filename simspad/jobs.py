@@ -7,10 +7,11 @@ calling process) is the only writer of ``manifest.json``, which it rewrites atom
 
 Determinism: every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key
 ``(sequence, lux)``), every render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same
-whatever the executor, the worker count or the order (same content, :func:`simspad.manifest.content_sha256`;
-the bytes too, except for a rare difference in where HDF5 places an object). The recordings' ``created_utc``
-attr is the dataset's creation time kept in the manifest (or ``$SOURCE_DATE_EPOCH``, or the ``created_utc``
-argument), not the wall-clock time of each write, so re-running or resuming does not change any file's bytes.
+whatever the executor, the worker count or the order: byte for byte (the renderer loads scenes with a
+canonical emitter order and the recording writer's HDF5 layout depends only on the data). The recordings'
+``created_utc`` attr is the dataset's creation time kept in the manifest (or ``$SOURCE_DATE_EPOCH``, or the
+``created_utc`` argument), not the wall-clock time of each write, so re-running or resuming does not change any
+file's bytes; two separate datasets from one spec differ only in that attr unless ``SOURCE_DATE_EPOCH`` pins it.
 
 Resume: a recording is skipped when its manifest entry is complete, its ``recording_hash`` (a hash of
 everything that affects that file) is unchanged, and the file's size and sha256 match. Temporary files of a
