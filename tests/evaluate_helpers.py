@@ -14,7 +14,8 @@ import numpy as np
 
 from simspad.io.recording import RecordingWriter
 from simspad.sensors.presets import sensor_params
-from simspad.sensors.spad import detection_probability, spad_attrs
+from simspad.sensors.spad import spad_attrs
+from simspad.spad_statistics import detection_probability
 
 H, W = 24, 32
 GT_RATE_HZ = 2000.0
@@ -47,7 +48,7 @@ def write_recording(path: Path, *, sequence: str = "ramp", scene: str = "ramp", 
             n_bins = int(DURATION_S / bin_s) + 1
             q = p.pixel_pitch_m ** 2 * p.fill_factor * p.qe
             dcr = np.full((h, w), p.dcr_median_cps, np.float32)
-            prob = detection_probability(flux, gate_s, q, dcr)
+            prob = detection_probability(flux, q, gate_s, dcr)
             rng = np.random.default_rng(seed)
             bits = (rng.random((n_bins, h, w)) < prob).astype(np.uint8)
             wr.write_dataset("spad/bits", np.packbits(bits, axis=2, bitorder="little"))

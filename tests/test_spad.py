@@ -16,9 +16,9 @@ from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
 from simspad.radiometry import flux_scale
 from simspad.sensors.presets import SpadParams
-from simspad.sensors.spad import (SpadChunker, auto_gate, dcr_map, detection_area_m2, detection_probability,
-                                  estimate_flux, log_flux_variance, n_bins, pack_bits, resolve_gate, simulate_spad,
-                                  unpack_bits)
+from simspad.sensors.spad import (SpadChunker, auto_gate, dcr_map, detection_area_m2, n_bins, pack_bits, resolve_gate,
+                                  simulate_spad, unpack_bits)
+from simspad.spad_statistics import detection_probability, estimate_flux, log_flux_variance
 from simspad.timeline import Timeline
 
 H, W = 48, 64
@@ -84,12 +84,12 @@ def test_kernel_places_bits_at_their_column():
 def test_estimate_flux_inverts_probability_and_clamps():
     q, gate, dcr = 1e-11, 1e-6, 50.0
     flux = np.array([1e14, 1e15, 1e16])
-    p = detection_probability(flux, gate, q, dcr)
+    p = detection_probability(flux, q, gate, dcr)
     n = 10_000
-    assert np.allclose(estimate_flux(p * n, n, gate, dcr, q), flux, rtol=1e-9)
-    full = estimate_flux(n, n, gate, dcr, q)
+    assert np.allclose(estimate_flux(p * n, n, q, gate, dcr), flux, rtol=1e-9)
+    full = estimate_flux(n, n, q, gate, dcr)
     assert np.isfinite(full) and np.isclose(full, (math.log(n) / gate - dcr) / q)
-    assert np.isclose(log_flux_variance(1.0, 100), (math.e - 1) / 100)
+    assert np.isclose(log_flux_variance(1.0, 100, 1.0, 1.0), (math.e - 1) / 100)  # x = 1, no dark counts
 
 
 def test_auto_gate_solves_the_percentile_and_clips():
@@ -133,14 +133,14 @@ def test_flat_field_bit_rate_matches_binomial(lux):
     dcr = dcr_map((H, W), p, rng)
     n = 6000
     counts = _counts(SpadChunker(_flat_timeline(flux), 0.0, n, p, dcr, rng), n, W)
-    expected = detection_probability(flux, gate, q, dcr.astype(np.float64))
+    expected = detection_probability(flux, q, gate, dcr.astype(np.float64))
     assert 1e-4 < expected.mean() < 0.99
     total, mu = counts.sum(), n * expected.sum()
     assert abs(total - mu) < 4.5 * math.sqrt(float(np.sum(n * expected * (1 - expected))))
     stat, dof, bound = _chi2_ok(counts, expected, n)
     assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
     # the same bound rejects a model 5 % off in flux
-    wrong = detection_probability(1.05 * flux, gate, q, dcr.astype(np.float64))
+    wrong = detection_probability(1.05 * flux, q, gate, dcr.astype(np.float64))
     assert abs(total - n * wrong.sum()) > 4.5 * math.sqrt(float(np.sum(n * wrong * (1 - wrong))))
 
 
@@ -301,10 +301,9 @@ def test_ml_estimator_recovers_flux_within_predicted_std(x):
     dcr = dcr_map((H, W), p, rng)
     n = 3000
     counts = _counts(SpadChunker(_flat_timeline(flux), 0.0, n, p, dcr, rng), n, W)
-    est = estimate_flux(counts, n, p.gate_s, dcr.astype(np.float64), q)
-    x_tot = x + dcr.astype(np.float64) * p.gate_s
-    # Var(ln Φ̂) = Var(ln ratê)·(rate/λ)² = (e^{x_tot} − 1)/(n·x_tot²)·(x_tot/x)²
-    sd = np.sqrt(log_flux_variance(x_tot, n)) * x_tot / x
+    est = estimate_flux(counts, n, q, p.gate_s, dcr.astype(np.float64))
+    # Var(ln Φ̂) = (e^{x_tot} − 1)/(n·x²), x_tot = x + r_dark·gate: dark counts add noise, not signal
+    sd = np.sqrt(log_flux_variance(flux, n, q, p.gate_s, dcr.astype(np.float64)))
     z = (np.log(est) - math.log(flux)) / sd
     N = z.size
     assert abs(z.mean()) < 4.5 / math.sqrt(N) + 0.05  # + O(1/√n) bias of the ML estimator

@@ -20,6 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simspad import spad_statistics as _stats
+from simspad.spad_statistics import detection_probability  # noqa: F401  (re-exported)
+
 # A log estimate from fewer than this many expected detections/electrons is treated as this many: it keeps
 # ln Φ finite for empty pixels and gives them a correspondingly large variance (≈ 1/FLOOR_COUNT).
 FLOOR_COUNT = 0.5
@@ -62,19 +65,9 @@ class SpadResponse:
         return cls(q, gate_s, bin_s, dcr)
 
 
-def detection_probability(flux_ph_s_m2, q_m2, gate_s, dcr_cps=0.0):
-    """Probability that a gated bin reads 1 under constant photon irradiance."""
-    return -np.expm1(-(q_m2 * np.asarray(flux_ph_s_m2, dtype=np.float64) + dcr_cps) * gate_s)
-
-
 def estimate_flux(counts, n_bins, q_m2, gate_s, dcr_cps=0.0):
-    """ML photon irradiance (ph s⁻¹ m⁻²) from ``counts`` ones in ``n_bins`` bins, clipped at 0.
-
-    ``counts = n_bins`` is clamped to ``n_bins − 1`` (the estimator is infinite there).
-    """
-    s = np.minimum(np.asarray(counts, dtype=np.float64), n_bins - 1.0)
-    rate = -np.log1p(-s / n_bins) / gate_s - dcr_cps
-    return np.maximum(rate, 0.0) / q_m2
+    """ML photon irradiance (ph s⁻¹ m⁻²) from ``counts`` ones in ``n_bins`` bins, clipped at 0 (an image)."""
+    return np.maximum(_stats.estimate_flux(counts, n_bins, q_m2, gate_s, dcr_cps), 0.0)
 
 
 def floor_flux(n_bins, q_m2, gate_s):
@@ -83,14 +76,10 @@ def floor_flux(n_bins, q_m2, gate_s):
 
 
 def log_flux_variance(flux_ph_s_m2, n_bins, q_m2, gate_s, dcr_cps=0.0):
-    """Cramér–Rao variance of ln Φ̂ for ``n_bins`` gated bins: ``(e^y − 1)/(n x²)``, x = qΦτ, y = x + r_d τ.
-
-    Irradiances below :func:`floor_flux` are evaluated at the floor.
-    """
+    """Cramér–Rao variance of ln Φ̂ (:func:`simspad.spad_statistics.log_flux_variance`), with irradiances
+    below :func:`floor_flux` evaluated at the floor."""
     flux = np.maximum(np.asarray(flux_ph_s_m2, dtype=np.float64), floor_flux(n_bins, q_m2, gate_s))
-    x = q_m2 * flux * gate_s
-    y = x + np.asarray(dcr_cps, dtype=np.float64) * gate_s
-    return np.expm1(y) / (n_bins * x * x)
+    return _stats.log_flux_variance(flux, n_bins, q_m2, gate_s, dcr_cps)
 
 
 @dataclass(frozen=True)

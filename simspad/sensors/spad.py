@@ -71,66 +71,6 @@ def detection_area_m2(params: SpadParams) -> float:
     return float(params.pixel_pitch_m) ** 2 * float(params.fill_factor) * float(params.qe)
 
 
-def detection_probability(flux_ph_s_m2, gate_s: float, q_m2: float, dcr_cps=0.0):
-    """Probability that a gated bin reads 1 under constant flux: ``1 − exp(−(q·Φ + r_dark)·gate_s)``.
-
-    Parameters
-    ----------
-    flux_ph_s_m2 : float or ndarray
-        Sensor-plane photon irradiance, photons s⁻¹ m⁻².
-    gate_s : float
-        Gate duration, s.
-    q_m2 : float
-        Detection area (pitch²·fill factor·qe), m².
-    dcr_cps : float or ndarray
-        Dark count rate, counts s⁻¹.
-
-    Returns
-    -------
-    float or ndarray
-        P(bit = 1), computed with ``expm1`` so tiny probabilities keep full precision.
-    """
-    rate = np.asarray(flux_ph_s_m2, dtype=np.float64) * q_m2 + np.asarray(dcr_cps, dtype=np.float64)
-    return -np.expm1(-rate * gate_s)
-
-
-def estimate_flux(S, n, gate_s: float, dcr_cps, q):
-    """Maximum-likelihood flux from ``S`` ones in ``n`` gated bins (DESIGN §4).
-
-    ``Φ̂ = (−ln(1 − S/n)/gate_s − r_dark)/q``, with ``S = n`` clamped to ``n − 1`` (the ML estimate is infinite
-    there).
-
-    Parameters
-    ----------
-    S : int or ndarray
-        Number of ones per pixel.
-    n : int
-        Number of bins summed.
-    gate_s : float
-        Gate duration, s.
-    dcr_cps : float or ndarray
-        Dark count rate, counts s⁻¹.
-    q : float
-        Detections s⁻¹ per unit of flux: the detection area in m² for Φ in photons s⁻¹ m⁻²
-        (``attrs["detection_area_m2"]`` of a recording), or ``fill_factor·qe`` for photons s⁻¹ per pixel.
-
-    Returns
-    -------
-    ndarray
-        Flux estimate in the units ``q`` converts from (may be slightly negative where S is at the dark level).
-    """
-    S = np.minimum(np.asarray(S, dtype=np.float64), n - 1)
-    rate = -np.log1p(-S / n) / gate_s
-    return (rate - np.asarray(dcr_cps, dtype=np.float64)) / q
-
-
-def log_flux_variance(x, n):
-    """Variance of ``ln Φ̂`` for ``n`` bins at ``x = q·Φ·gate_s`` (delta method): ``(eˣ − 1)/(n·x²)``."""
-    x = np.asarray(x, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.expm1(x) / (n * x * x)
-
-
 def dcr_map(shape: tuple[int, int], params: SpadParams, rng: np.random.Generator) -> np.ndarray:
     """Dark count rate of every pixel, counts s⁻¹, float32 ``[H, W]``.
 
