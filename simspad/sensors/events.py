@@ -34,9 +34,10 @@ Per pixel (flattened index ``y·W + x``):
 Randomness: one splitmix64 stream per pixel, seeded from the sensor's ``rng``, so the result does not depend on
 chunking, on the pixel blocks or on the thread count; jitter draws are normal quantiles of one uniform each
 (Acklam's approximation, relative error < 1.2·10⁻⁹). Events stream out in time chunks, sorted by (µs timestamp,
-pixel index): the kernel emits them in pixel order, so one stable counting sort over µs buckets orders a chunk,
-and a linear merge joins it to the events held back from the previous one; events read out after the
-recording's end are dropped.
+pixel index): the kernel emits them in pixel order (time and a packed pixel/polarity/label code), so one stable
+counting sort over µs buckets orders a chunk, and a linear merge joins it to the events held back from the
+previous one; events read out after the recording's end are dropped. A pixel block whose buffer slice fills up
+continues from the pixel that did not fit in a larger slice, so no finished work is redone.
 
 Cost: an internal step costs one exp and no log (a step cut by the tolerance rule advances ln I by a per-pixel
 constant; ln I at keyframes is taken once per pixel and keyframe); a crossing costs about two exp (Halley
@@ -311,6 +312,30 @@ def _first_crossing(a_off, b_slope, c, tau, x0, h, d0, dh, theta_on, theta_off, 
     return -1.0, 0
 
 
+# An event's pixel, polarity and label travel packed in one int64 (``pixel·8 + polarity·4 + label``) from the
+# kernel through the bucket sort: two scattered stores per event instead of four.
+@numba.njit(cache=True, inline="always")
+def _pack(pixel, polarity, label):
+    return (np.int64(pixel) << 3) | (np.int64(polarity) << 2) | np.int64(label)
+
+
+@numba.njit(cache=True)
+def _unpack(t_s, code):
+    """``(t_us, pixel, polarity, label)`` of events given as time (s) and packed code (one sequential pass)."""
+    n = code.size
+    t_us = np.empty(n, np.int64)
+    pix = np.empty(n, np.int64)
+    pol = np.empty(n, np.uint8)
+    lab = np.empty(n, np.uint8)
+    for k in range(n):
+        t_us[k] = np.int64(math.floor(t_s[k] * 1e6))
+        c = code[k]
+        pix[k] = c >> 3
+        pol[k] = np.uint8((c >> 2) & 1)
+        lab[k] = np.uint8(c & 3)
+    return t_us, pix, pol, lab
+
+
 @numba.njit(cache=True)
 def _init_state(current0, rng_state, lp, ref, t_ref, t_avail, hz_shot, hz_hot, t0):
     for p in range(current0.size):
@@ -328,9 +353,12 @@ def _init_state(current0, rng_state, lp, ref, t_ref, t_avail, hz_shot, hz_hot, t
 def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, shot_coef, shot_exp,
                 f_max, i_ref, step_tol, latency, jitter, refractory,
                 lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
-                buf_t, buf_p, buf_pol, buf_lab, start, limit):
+                buf_t, buf_code, start, limit):
     """Advance pixels ``p0 … p1−1`` over the keyframe pieces of one chunk, writing their events (unsorted) into
-    the buffers from index ``start``; returns the index after the last event, or −1 if ``limit`` was reached.
+    the buffers from index ``start``. Returns ``(end, p_next)``: the index after the last event written and the
+    first pixel not done (``p1`` when all are). When ``limit`` is reached inside pixel p, p's events are dropped
+    and its state is left untouched (it is stored only once the pixel is done): ``(index of p's first event, p)``,
+    so the caller can continue from p elsewhere and get exactly what one uninterrupted run gives.
 
     ``knot_current[p, j]`` is pixel p's photocurrent at ``knot_t[j]`` (pixel-major, so each pixel's knots are
     contiguous in memory); between knots it is linear in time. The state arrays are updated in place.
@@ -340,6 +368,7 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
     inv_two_pi_fmax = 1.0 / (_TWO_PI * f_max)
     two_pi_fmax = _TWO_PI * f_max
     for p in range(p0, p1):
+        n_first = n_ev
         theta_on = th_on[p]
         theta_off = th_off[p]
         rho = leak_hz[p] * theta_on
@@ -521,11 +550,9 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
                     t_out = cur + max(delay, 0.0)
                     t_avail = t_out + refractory
                     if n_ev == limit:
-                        return -1
+                        return n_first, p
                     buf_t[n_ev] = t_out
-                    buf_p[n_ev] = p
-                    buf_pol[n_ev] = pol
-                    buf_lab[n_ev] = label
+                    buf_code[n_ev] = _pack(p, pol, label)
                     n_ev += 1
                 lp = lp_e
                 t = s_b
@@ -539,27 +566,28 @@ def _run_pixels(p0, p1, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz, sh
         hzs_state[p] = hz_shot
         hzh_state[p] = hz_hot
         rng_state[p] = rs
-    return n_ev
+    return n_ev, p1
 
 
 @numba.njit(cache=True, parallel=True)
 def _simulate_blocks(pix_lo, pix_hi, starts, limits, knot_t, knot_current, th_on, th_off, leak_hz, hot_hz,
                      shot_coef, shot_exp, f_max, i_ref, step_tol, latency, jitter, refractory,
                      lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
-                     buf_t, buf_p, buf_pol, buf_lab):
+                     buf_t, buf_code):
     """Run pixel blocks in parallel: block i advances pixels ``pix_lo[i] … pix_hi[i]−1`` and writes its events
     into the buffers' slice ``[starts[i], limits[i])``.
 
-    Returns each block's end index (−1: the block overflowed its slice).
+    Returns each block's end index and first pixel not done (``pix_hi[i]`` unless the slice filled up).
     """
     n_blocks = pix_lo.size
     ends = np.empty(n_blocks, np.int64)
+    p_next = np.empty(n_blocks, np.int64)
     for b in numba.prange(n_blocks):
-        ends[b] = _run_pixels(pix_lo[b], pix_hi[b], knot_t, knot_current, th_on, th_off, leak_hz, hot_hz,
-                              shot_coef, shot_exp, f_max, i_ref, step_tol, latency, jitter, refractory,
-                              lp_state, ref_state, tref_state, tavail_state, hzs_state, hzh_state, rng_state,
-                              buf_t, buf_p, buf_pol, buf_lab, starts[b], limits[b])
-    return ends
+        ends[b], p_next[b] = _run_pixels(pix_lo[b], pix_hi[b], knot_t, knot_current, th_on, th_off, leak_hz,
+                                         hot_hz, shot_coef, shot_exp, f_max, i_ref, step_tol, latency, jitter,
+                                         refractory, lp_state, ref_state, tref_state, tavail_state, hzs_state,
+                                         hzh_state, rng_state, buf_t, buf_code, starts[b], limits[b])
+    return ends, p_next
 
 
 @numba.njit(cache=True)
@@ -576,11 +604,12 @@ def _us_range(starts, ends, buf_t):
 
 
 @numba.njit(cache=True)
-def _bucket_blocks(starts, ends, buf_t, buf_p, buf_pol, buf_lab, t_lo, span):
+def _bucket_blocks(starts, ends, buf_t, buf_code, t_lo, span):
     """The blocks' events sorted by (µs timestamp, pixel) with one stable counting sort over µs buckets.
 
     Blocks cover increasing pixel ranges and each pixel's events are in time order, so reading the blocks in
-    order already gives pixel order inside every µs bucket: a single pass suffices.
+    order already gives pixel order inside every µs bucket: a single pass suffices. Only the time and the
+    packed code are scattered; the other columns are unpacked afterwards in one sequential pass.
     """
     n = 0
     for b in range(starts.size):
@@ -592,20 +621,15 @@ def _bucket_blocks(starts, ends, buf_t, buf_p, buf_pol, buf_lab, t_lo, span):
     for j in range(span):
         count[j + 1] += count[j]
     t_s = np.empty(n, np.float64)
-    t_us = np.empty(n, np.int64)
-    pix = np.empty(n, np.int64)
-    pol = np.empty(n, np.uint8)
-    lab = np.empty(n, np.uint8)
+    code = np.empty(n, np.int64)
     for b in range(starts.size):
         for i in range(starts[b], ends[b]):
-            u = np.int64(math.floor(buf_t[i] * 1e6))
-            k = count[u - t_lo]
-            count[u - t_lo] = k + 1
+            u = np.int64(math.floor(buf_t[i] * 1e6)) - t_lo
+            k = count[u]
+            count[u] = k + 1
             t_s[k] = buf_t[i]
-            t_us[k] = u
-            pix[k] = buf_p[i]
-            pol[k] = buf_pol[i]
-            lab[k] = buf_lab[i]
+            code[k] = buf_code[i]
+    t_us, pix, pol, lab = _unpack(t_s, code)
     return t_s, t_us, pix, pol, lab
 
 
@@ -633,23 +657,20 @@ def _merge_sorted(a_t, a_us, a_pix, a_pol, a_lab, b_t, b_us, b_pix, b_pol, b_lab
 
 
 @numba.njit(cache=True)
-def _gather(starts, ends, buf_t, buf_p, buf_pol, buf_lab):
-    """Concatenate the blocks' events in block (= pixel) order."""
+def _gather(starts, ends, buf_t, buf_code):
+    """Concatenate the blocks' events in block (= pixel) order: ``(t_s, pixel, polarity, label)``."""
     n = 0
     for b in range(starts.size):
         n += ends[b] - starts[b]
     t = np.empty(n, np.float64)
-    pix = np.empty(n, np.int64)
-    pol = np.empty(n, np.uint8)
-    lab = np.empty(n, np.uint8)
+    code = np.empty(n, np.int64)
     k = 0
     for b in range(starts.size):
         for i in range(starts[b], ends[b]):
             t[k] = buf_t[i]
-            pix[k] = buf_p[i]
-            pol[k] = buf_pol[i]
-            lab[k] = buf_lab[i]
+            code[k] = buf_code[i]
             k += 1
+    _, pix, pol, lab = _unpack(t, code)
     return t, pix, pol, lab
 
 
@@ -699,7 +720,7 @@ class EventSimulator:
         self._pending = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.uint8),
                          np.empty(0, np.uint8))
         self._cap = max(1 << 16, 4 * n)  # events expected per chunk (adapts; an overflowing block is rerun)
-        self._buf = (np.empty(0), np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.uint8))
+        self._buf = (np.empty(0), np.empty(0, np.int64))  # event time (s), packed pixel/polarity/label
 
     def advance(self, knot_t: np.ndarray, knot_current: np.ndarray):
         """Run the pieces between ``knot_t`` (m+1 instants) on photocurrents ``[m+1, H·W]``.
@@ -720,15 +741,15 @@ class EventSimulator:
     def _buffers(self, size: int):
         """Event buffers of at least ``size`` rows, kept between chunks (no fresh pages to fault in each time)."""
         if self._buf[0].size < size:
-            self._buf = (np.empty(size, np.float64), np.empty(size, np.int64), np.empty(size, np.uint8),
-                         np.empty(size, np.uint8))
+            self._buf = (np.empty(size, np.float64), np.empty(size, np.int64))
         return self._buf
 
     def _run_chunk(self, knot_t, knot_current):
         """All pixels over one chunk, in parallel pixel blocks, sorted by (µs, pixel).
 
-        A block that overflows its buffer slice is rerun alone with more room, after its pixels' state is
-        restored (per-pixel random streams make the rerun identical); the other blocks' results stand.
+        A block that fills its buffer slice stops at the pixel that did not fit (that pixel's state untouched);
+        the rest of the block continues in a fresh, larger slice (per-pixel random streams make the result the
+        same as one uninterrupted run), so no finished work is redone.
         """
         p = self.params
         m = self.maps
@@ -736,35 +757,42 @@ class EventSimulator:
         n_blocks = max(1, min(n_pix, 16 * numba.get_num_threads(), -(-n_pix // 256)))
         bounds = np.arange(n_blocks + 1, dtype=np.int64) * n_pix // n_blocks
         pix_lo, pix_hi = bounds[:-1].copy(), bounds[1:].copy()
+        block = np.arange(n_blocks, dtype=np.int64)
         room = max(1024, -(-2 * self._cap // n_blocks))
         starts = np.arange(n_blocks, dtype=np.int64) * room
-        limits = starts + room
         state = (self.lp, self.ref, self.t_ref, self.t_avail, self.hz_shot, self.hz_hot, self.rng_state)
-        saved = [a.copy() for a in state]
         args = (knot_t, knot_current, m.threshold_on, m.threshold_off, m.leak_rate_hz, m.hot_rate_hz,
                 float(self.shot_coef), float(p.shot_noise_current_exponent), float(p.photoreceptor_cutoff_hz_max),
                 float(p.photoreceptor_cutoff_ref_rate_e_s), float(p.substep_tolerance), float(p.latency_s),
                 float(p.jitter_s), float(p.refractory_s) + _REFRACTORY_GUARD_S, *state)
         used_rows = n_blocks * room
-        ends = _simulate_blocks(pix_lo, pix_hi, starts, limits, *args, *self._buffers(used_rows))
-        while np.any(ends < 0):
-            failed = np.flatnonzero(ends < 0)
-            for b in failed:
-                for a, keep in zip(state, saved):
-                    a[pix_lo[b]:pix_hi[b]] = keep[pix_lo[b]:pix_hi[b]]
+        self._buffers(used_rows)
+        seg_pix, seg_start, seg_end, seg_block = [], [], [], []  # finished buffer segments, each a pixel range
+        while True:
+            ends, p_next = _simulate_blocks(pix_lo, pix_hi, starts, starts + room, *args, *self._buf)
+            seg_pix.append(pix_lo)
+            seg_start.append(starts)
+            seg_end.append(ends)
+            seg_block.append(block)
+            left = np.flatnonzero(p_next < pix_hi)
+            if left.size == 0:
+                break
             room *= 4
-            new_starts = used_rows + np.arange(failed.size, dtype=np.int64) * room
-            used_rows += failed.size * room
-            if self._buf[0].size < used_rows:  # grow, keeping the blocks already done
+            pix_lo, pix_hi, block = p_next[left], pix_hi[left], block[left]
+            starts = used_rows + np.arange(left.size, dtype=np.int64) * room
+            used_rows += left.size * room
+            if self._buf[0].size < used_rows:  # grow, keeping the segments already written
                 old = self._buf
                 self._buf = tuple(np.empty(used_rows, a.dtype) for a in old)
                 for a, b in zip(self._buf, old):
                     a[:b.size] = b
-            ends[failed] = _simulate_blocks(pix_lo[failed], pix_hi[failed], new_starts, new_starts + room,
-                                            *args, *self._buf)
-            starts[failed] = new_starts
+        seg_pix = np.concatenate(seg_pix)
+        order = np.argsort(seg_pix, kind="stable")  # pixel order (a segment left empty sorts harmlessly)
+        starts = np.concatenate(seg_start)[order]
+        ends = np.concatenate(seg_end)[order]
         counts = ends - starts
-        self._cap = max(1024, int(counts.max()) * n_blocks)
+        per_block = np.bincount(np.concatenate(seg_block)[order], weights=counts, minlength=n_blocks)
+        self._cap = max(1024, int(per_block.max()) * n_blocks)
         buf = self._buf
         if counts.sum() == 0:
             return tuple(a[:0] for a in self._pending)
