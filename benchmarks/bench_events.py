@@ -1,33 +1,40 @@
 """Event-camera throughput: SimSPAD's per-pixel numba simulator vs a naive per-frame NumPy reference.
 
 The reference is the v2e-style approach, vectorised over pixels and looping over input frames: per frame it
-low-passes the log photocurrent (v2e's ``eps = dt/τ`` clipped at 1), compares it with the reference, emits
-``floor(Δ/θ)`` events per pixel with timestamps interpolated linearly between the two frames, draws shot
-noise, leak and hot-pixel events as one uniform per pixel per frame, drops events inside the refractory period
-and sorts everything by time at the end. Both run in this process on the same input keyframes (a textured
-scene panning 0.5 px per keyframe — the renderer's adaptive keyframe budget — piecewise linear in time), each
-after a warm-up.
+low-passes the log photocurrent (v2e's ``eps = dt/τ`` clipped at 1, or the exponential update), compares it with
+the reference level, emits ``floor(Δ/θ)`` events per pixel with timestamps interpolated linearly between the two
+frames, draws shot noise and hot-pixel events as one uniform per pixel per frame, drops events inside the
+refractory period and sorts everything by time at the end. Both run in this process on a textured scene panning
+0.5 px per keyframe (the renderer's adaptive keyframe budget), piecewise linear in time, each after a warm-up.
 
-Wall time and process CPU time (all threads) are both reported: the machine may be shared, and the simulator
-runs on several numba threads while the reference is single-threaded NumPy, so the CPU-time ratio is the
-like-for-like figure (work done) and the wall-time ratio the user's view on this machine.
+Two comparisons:
 
-Two reference runs are timed:
+1. **Same input** (``--size``, ``--keyframes``): both fed the keyframes only, full sensor model. Wall time and
+   process CPU time (all threads) are reported: SimSPAD runs on the numba threads, the reference on one core, so
+   the CPU-time ratio is the work done and the wall-time ratio the user's view on this machine. The two do *not*
+   produce the same events: at keyframe spacing the reference's low-pass and linear crossing interpolation are
+   far off (see 2), while SimSPAD integrates each pixel exactly with adaptive internal steps.
+2. **Work–precision** (``--wp-size``, ``--wp-keyframes``): accuracy against CPU time (one core each) on the
+   deterministic core of the model (noise, leak, latency, jitter and refractory period off, so events are a
+   function of the input). Accuracy is the event-count error per pixel, polarity and 100 µs window against a
+   converged solution (SimSPAD at ``substep_tolerance = 1e-5``); the per-frame reference converges to the same
+   solution at first order in its frame interval, which shows both implement one model. SimSPAD is swept over
+   ``substep_tolerance``, the reference over frames per keyframe interval; the printed speed-up is the
+   reference's CPU time at SimSPAD's default accuracy (log-log interpolation) over SimSPAD's. The diagram goes
+   to ``benchmarks/results/bench_events.png``.
 
-- ``naive @ keyframes``: the reference fed the keyframes only (its low-pass and interpolation are then coarse:
-  dt = keyframe interval, while the bright pixels' photoreceptor τ is ≈ 50 µs);
-- ``naive @ τ/4``: the reference fed frames interpolated to dt ≤ τ_min/4, the step its explicit low-pass needs
-  to be accurate (what v2e's documentation asks for); SimSPAD gets the same accuracy from its exponential
-  integrator and adaptive per-pixel steps at keyframe input.
+Peak memory of a fresh process streaming a sequence, and one 4× as long, to HDF5 is reported last.
 
-Run: ``python benchmarks/bench_events.py [--size 256] [--keyframes 100] [--rate 1000] [--repeat 3]``
+Run: ``python benchmarks/bench_events.py [--size 256] [--keyframes 100] [--repeat 3]``
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -57,33 +64,39 @@ def make_timeline(size: int, n_keyframes: int, rate_hz: float, lux: float, flow_
     return Timeline.from_arrays(times, frames, scale=scale)
 
 
-def run_simspad(tl: Timeline, params: EventParams, lux: float, seed: int = 0):
-    """Events of the numba simulator over the whole timeline (in memory, sorted).
-
-    Returns ``(n_events, wall_s, cpu_s)``; ``cpu_s`` is this process's CPU time over all threads.
-    """
-    t0, c0 = time.perf_counter(), time.process_time()
+def simspad_events(tl: Timeline, params: EventParams, lux: float, seed: int = 0):
+    """Events of the numba simulator over the whole timeline: ``(t_s, pixel, polarity, label)``, sorted."""
     rng = np.random.default_rng(seed)
     maps = events.draw_pixel_maps(params, (tl.height, tl.width), rng)
     current_1lux = events.reference_current_1lux(float(tl.keyframe(0).mean()), lux, params)
     sim = events.EventSimulator(params, (tl.height, tl.width),
                                 events.photocurrent_e_s(tl.sample(tl.t_start), params).ravel(), tl.t_start,
                                 current_1lux, maps)
-    n = 0
-    for knot_t, knot_current in events.iter_knot_chunks(tl, tl.t_start, tl.t_end, params):
-        n += sim.advance(knot_t, knot_current)[0].size
-    n += sim.finish()[0].size
+    batches = [sim.advance(knot_t, knot_current)
+               for knot_t, knot_current in events.iter_knot_chunks(tl, tl.t_start, tl.t_end, params)]
+    batches.append(sim.finish())
+    t_s, _, pixel, pol, label = (np.concatenate(column) for column in zip(*batches))
+    return t_s, pixel, pol, label
+
+
+def run_simspad(tl: Timeline, params: EventParams, lux: float, seed: int = 0):
+    """Time :func:`simspad_events`: ``(n_events, wall_s, cpu_s)``; ``cpu_s`` is this process's CPU time, all
+    threads."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    n = simspad_events(tl, params, lux, seed)[0].size
     return n, time.perf_counter() - t0, time.process_time() - c0
 
 
-def run_naive(tl: Timeline, params: EventParams, lux: float, substeps: int = 1, seed: int = 0):
-    """The v2e-style per-frame NumPy reference; ``substeps`` frames are interpolated per keyframe interval.
+def naive_events(tl: Timeline, params: EventParams, lux: float, substeps: int = 1, seed: int = 0,
+                 lowpass: str = "euler"):
+    """The per-frame NumPy reference; ``substeps`` frames are interpolated per keyframe interval.
 
-    It produces what the simulator produces — (µs timestamp, x, y, polarity, label) arrays sorted by time, with
-    latency and Gaussian jitter on every timestamp — so neither side skips output work.
-    Returns ``(n_events, wall_s, cpu_s, n_frames)``.
+    ``lowpass="euler"`` is v2e's update ``lp += min(dt/τ, 1)·(ln I − lp)``; ``"exp"`` the exponential update
+    ``lp += (1 − exp(−dt/τ))·(ln I − lp)`` (one more exp per pixel and frame, about 2.5× more accurate per
+    frame). It produces what the simulator produces — (µs timestamp, x, y, polarity, label) arrays sorted by
+    time, with latency and Gaussian jitter on every timestamp — so neither side skips output work.
+    Returns ``(t_s, pixel, polarity, label, n_frames)``, sorted by time.
     """
-    t_start, c_start = time.perf_counter(), time.process_time()
     rng = np.random.default_rng(seed)
     shape = (tl.height, tl.width)
     maps = events.draw_pixel_maps(params, shape, np.random.default_rng(seed))
@@ -104,7 +117,7 @@ def run_naive(tl: Timeline, params: EventParams, lux: float, substeps: int = 1, 
         current = events.photocurrent_e_s(tl.sample(t), params)
         log_i = np.log(current)
         tau = 1.0 / (2 * np.pi * events.cutoff_hz(current, params))
-        eps = np.minimum(dt / tau, 1.0)
+        eps = np.minimum(dt / tau, 1.0) if lowpass == "euler" else -np.expm1(-dt / tau)
         lp_new = (1 - eps) * lp + eps * log_i
         ref -= leak * dt
         diff = lp_new - ref
@@ -138,9 +151,126 @@ def run_naive(tl: Timeline, params: EventParams, lux: float, substeps: int = 1, 
         t_prev = t
     t_all = np.concatenate(out_t)
     order = np.argsort(t_all, kind="stable")
-    _ = (np.floor(t_all[order] * 1e6).astype(np.int64), np.concatenate(out_x).astype(np.uint16)[order],
-         np.concatenate(out_y).astype(np.uint16)[order], np.concatenate(out_p)[order], np.concatenate(out_l)[order])
-    return t_all.size, time.perf_counter() - t_start, time.process_time() - c_start, frame_times.size
+    _stored_t_us = np.floor(t_all[order] * 1e6).astype(np.int64)  # the file's columns: their cost counts
+    x = np.concatenate(out_x).astype(np.uint16)[order]
+    y = np.concatenate(out_y).astype(np.uint16)[order]
+    pixel = y.astype(np.int64) * tl.width + x
+    return t_all[order], pixel, np.concatenate(out_p)[order], np.concatenate(out_l)[order], frame_times.size
+
+
+def run_naive(tl: Timeline, params: EventParams, lux: float, substeps: int = 1, seed: int = 0,
+              lowpass: str = "euler"):
+    """Time :func:`naive_events`: ``(n_events, wall_s, cpu_s, n_frames)``."""
+    t_start, c_start = time.perf_counter(), time.process_time()
+    out = naive_events(tl, params, lux, substeps, seed, lowpass)
+    return out[0].size, time.perf_counter() - t_start, time.process_time() - c_start, out[-1]
+
+
+def count_error(ev, ev_ref, n_pix: int, t_end_s: float, window_s: float) -> float:
+    """Event-count error of ``ev`` against ``ev_ref`` (each ``(t_s, pixel, polarity, ...)``).
+
+    Events are counted per pixel, polarity and time window of ``window_s``; the error is
+    ``Σ|N − N_ref| / Σ N_ref``. It counts missing, extra and mistimed events (an event moved into another window
+    counts twice), at the time scale downstream methods integrate over.
+    """
+    n_win = int(math.ceil(t_end_s / window_s)) + 2
+
+    def counts(e):
+        key = (np.asarray(e[1], np.int64) * 2 + e[2]) * n_win + np.floor(e[0] / window_s).astype(np.int64)
+        return np.bincount(key, minlength=2 * n_pix * n_win)
+
+    ref = counts(ev_ref)
+    return float(np.abs(counts(ev) - ref).sum() / ref.sum())
+
+
+def deterministic_core(params: EventParams) -> EventParams:
+    """The preset with every random or simulator-specific part off (noise, leak, hot pixels, latency, jitter,
+    refractory period), so that events are a deterministic function of the input and two simulators of the same
+    model can be compared event by event."""
+    return dataclasses.replace(params, shot_noise_rate_hz_at_1lux=0.0, hot_pixel_fraction=0.0, leak_rate_hz=0.0,
+                               latency_s=0.0, jitter_s=0.0, refractory_s=0.0)
+
+
+def _interp_cost(costs, errors, target):
+    """CPU time at which a contender's (cost, error) curve reaches ``target`` error (log-log interpolation between
+    the last bracketing pair); ``(cost, True)`` if even its finest setting is less accurate (a lower bound)."""
+    order = np.argsort(costs)
+    c, e = np.asarray(costs)[order], np.asarray(errors)[order]
+    if e[-1] > target:
+        return float(c[-1]), True
+    for i in range(c.size - 2, -1, -1):
+        if e[i] > target >= e[i + 1]:
+            w = math.log(e[i] / target) / math.log(e[i] / e[i + 1])
+            return float(math.exp(math.log(c[i]) + w * math.log(c[i + 1] / c[i]))), False
+    return float(c[0]), False
+
+
+def work_precision(size: int, n_keyframes: int, rate_hz: float, lux: float, window_s: float, repeat: int,
+                   plot_path=None):
+    """Work-precision comparison: accuracy against CPU time for SimSPAD (over ``substep_tolerance``) and the
+    per-frame reference (over frames per keyframe interval, both low-pass updates), on the deterministic core.
+
+    The reference solution is SimSPAD at ``substep_tolerance = 1e-5``; the per-frame reference converges to it
+    as its frame interval shrinks (printed), which shows both implement the same model. SimSPAD runs on one
+    numba thread here, so CPU time is like for like. Returns the rows and the equal-accuracy speed-ups.
+    """
+    params = deterministic_core(EventParams())
+    tl = make_timeline(size, n_keyframes, rate_hz, lux)
+    n_pix, t_end = size * size, tl.t_end
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        ref = simspad_events(tl, dataclasses.replace(params, substep_tolerance=1e-5), lux)
+
+        def timed(fn):
+            best, out = np.inf, None
+            for _ in range(repeat):
+                c0 = time.process_time()
+                out = fn()
+                best = min(best, time.process_time() - c0)
+            return best, out
+
+        rows = []  # (contender, setting, cpu_s, n_events, error at window_s, error at 1 ms)
+        for tol in (0.1, 0.03, 0.01, 0.003, 0.001):
+            cpu, ev = timed(lambda: simspad_events(tl, dataclasses.replace(params, substep_tolerance=tol), lux))
+            rows.append(("simspad", tol, cpu, ev[0].size, count_error(ev, ref, n_pix, t_end, window_s),
+                         count_error(ev, ref, n_pix, t_end, 1e-3)))
+        for lowpass in ("euler", "exp"):
+            for sub in (1, 4, 16, 64, 256):
+                cpu, ev = timed(lambda: naive_events(tl, params, lux, sub, lowpass=lowpass))
+                rows.append((f"naive-{lowpass}", sub, cpu, ev[0].size, count_error(ev, ref, n_pix, t_end, window_s),
+                             count_error(ev, ref, n_pix, t_end, 1e-3)))
+    finally:
+        numba.set_num_threads(threads)
+    default_tol = EventParams().substep_tolerance
+    mine = next(r for r in rows if r[0] == "simspad" and r[1] == default_tol)
+    speedups = {}
+    for name in ("naive-euler", "naive-exp"):
+        cr = [r for r in rows if r[0] == name]
+        cost, bound = _interp_cost([r[2] for r in cr], [r[4] for r in cr], mine[4])
+        speedups[name] = (cost / mine[2], bound)
+    if plot_path is not None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6.4, 4.4))
+        for name, marker in (("simspad", "o"), ("naive-euler", "s"), ("naive-exp", "^")):
+            cr = [r for r in rows if r[0] == name]
+            ax.loglog([r[2] for r in cr], [r[4] for r in cr], marker=marker, label=name)
+            for r in cr:
+                ax.annotate(f"{r[1]:g}", (r[2], r[4]), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.axhline(mine[4], color="grey", lw=0.8, ls=":")
+        ax.set_xlabel("CPU time, s (one core)")
+        ax.set_ylabel(f"event-count error in {window_s * 1e6:.0f} µs windows")
+        ax.set_title(f"work-precision, {size}x{size} px, {n_keyframes} keyframes, {lux:g} lx\n"
+                     "labels: substep_tolerance (simspad), frames per keyframe interval (naive)", fontsize=9)
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(plot_path, dpi=110)
+        plt.close(fig)
+    return rows, speedups
 
 
 _STREAM_CHILD = """
@@ -166,7 +296,6 @@ def streaming_memory(size: int, lengths: tuple[int, ...], rate_hz: float) -> lis
     import subprocess
     import sys
     import tempfile
-    from pathlib import Path
 
     from simspad.timeline import write_render_dir
 
@@ -190,6 +319,10 @@ def main(argv=None):
     parser.add_argument("--rate", type=float, default=1000.0, help="keyframe rate, Hz")
     parser.add_argument("--lux", type=float, default=1000.0)
     parser.add_argument("--repeat", type=int, default=3, help="runs per contender; the fastest is reported")
+    parser.add_argument("--wp-size", type=int, default=128, help="work-precision scene width = height, pixels")
+    parser.add_argument("--wp-keyframes", type=int, default=21)
+    parser.add_argument("--plot", default=str(Path(__file__).parent / "results" / "bench_events.png"),
+                        help="work-precision diagram (PNG); '' for none")
     parser.add_argument("--memory", action=argparse.BooleanOptionalAction, default=True,
                         help="also measure peak memory while streaming a sequence and one 4x as long")
     parser.add_argument("--memory-size", type=int, default=128)
@@ -197,53 +330,45 @@ def main(argv=None):
     params = EventParams()
     tl = make_timeline(args.size, args.keyframes, args.rate, args.lux)
     duration = tl.t_end - tl.t_start
-    current = events.photocurrent_e_s(tl.keyframe(0), params)
-    tau_min = float((1.0 / (2 * np.pi * events.cutoff_hz(current, params))).min())
-    substeps = max(1, math.ceil((1.0 / args.rate) / (tau_min / 4)))
 
     small = make_timeline(16, 4, args.rate, args.lux)  # warm-up: numba compile / cache load, NumPy first calls
     run_simspad(small, params, args.lux), run_naive(small, params, args.lux)
 
-    def duel(fast, slow):
-        """The machine may be shared: alternate the contenders and keep each one's best wall and best CPU time
-        (CPU time = this process's, summed over threads, so other users' load inflates it less)."""
-        runs_a, runs_b = [], []
-        for _ in range(args.repeat):
-            runs_a.append(fast())
-            runs_b.append(slow())
-        best = lambda runs, i: min(r[i] for r in runs)  # noqa: E731
-        return (runs_a[0][0], best(runs_a, 1), best(runs_a, 2)), (runs_b[0][0], best(runs_b, 1), best(runs_b, 2),
-                                                                  runs_b[0][3])
+    # the machine may be shared: alternate the contenders and keep each one's best wall and best CPU time
+    runs_s, runs_n = [], []
+    for _ in range(args.repeat):
+        runs_s.append(run_simspad(tl, params, args.lux))
+        runs_n.append(run_naive(tl, params, args.lux))
+    best = lambda runs, i: min(r[i] for r in runs)  # noqa: E731
+    n_s, wall_s, cpu_s = runs_s[0][0], best(runs_s, 1), best(runs_s, 2)
+    n_k, wall_k, cpu_k = runs_n[0][0], best(runs_n, 1), best(runs_n, 2)
+    kf = args.keyframes - 1
+    print(f"1. same input: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "
+          f"({duration * 1e3:.0f} ms), {args.lux:g} lx, full model; simspad on {numba.get_num_threads()} numba "
+          f"thread(s) (NUMBA_NUM_THREADS), NumPy reference single-threaded; best of {args.repeat} alternating runs")
+    print(f"{'run':<22}{'wall s':>8}{'cpu s':>8}{'events':>10}{'events/s':>10}{'ev/cpu-s':>10}{'kf/s':>8}"
+          f"{'kf/cpu-s':>9}")
+    for name, wall, cpu, n in (("simspad (numba)", wall_s, cpu_s, n_s), ("naive @ keyframes", wall_k, cpu_k, n_k)):
+        print(f"{name:<22}{wall:>8.3f}{cpu:>8.3f}{n:>10d}{n / wall:>10.3g}{n / cpu:>10.3g}{kf / wall:>8.1f}"
+              f"{kf / cpu:>9.1f}")
+    print(f"speed-up (same input, different accuracy): {wall_k / wall_s:.2f}x wall, {cpu_k / cpu_s:.2f}x CPU time")
 
-    (n_s, wall_s, cpu_s), (n_k, wall_k, cpu_k, frames_k) = duel(lambda: run_simspad(tl, params, args.lux),
-                                                                lambda: run_naive(tl, params, args.lux))
-    # the τ/4 run is long: time a slice of the sequence and report rates
-    n_slice = max(3, args.keyframes // 10)
-    tl_slice = Timeline.from_arrays(tl.times_s[:n_slice], np.stack([tl.keyframe(i) for i in range(n_slice)]))
-    (n_ss, wall_ss, cpu_ss), (n_f, wall_f, cpu_f, frames_f) = duel(
-        lambda: run_simspad(tl_slice, params, args.lux),
-        lambda: run_naive(tl_slice, params, args.lux, substeps=substeps))
-
-    kf_s = args.keyframes - 1
-    print(f"scene: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "
-          f"({duration * 1e3:.0f} ms), {args.lux:g} lx, bright-pixel tau = {tau_min * 1e6:.0f} us; "
-          f"simspad on {numba.get_num_threads()} numba thread(s) (NUMBA_NUM_THREADS), NumPy reference "
-          f"single-threaded; best of {args.repeat} alternating runs each")
-    print(f"{'run':<26}{'wall s':>8}{'cpu s':>8}{'events':>10}{'events/s':>10}{'ev/cpu-s':>10}{'kf/s':>8}"
-          f"{'kf/cpu-s':>9}{'frames/s':>9}")
-    rows = [("simspad (numba)", wall_s, cpu_s, n_s, kf_s, kf_s),
-            ("naive @ keyframes", wall_k, cpu_k, n_k, kf_s, frames_k - 1),
-            (f"simspad, first {n_slice} kf", wall_ss, cpu_ss, n_ss, n_slice - 1, n_slice - 1),
-            (f"naive @ tau/4 ({substeps}/kf)", wall_f, cpu_f, n_f, n_slice - 1, frames_f - 1)]
-    for name, wall, cpu, n, kf, frames in rows:
-        print(f"{name:<26}{wall:>8.3f}{cpu:>8.3f}{n:>10d}{n / wall:>10.3g}{n / cpu:>10.3g}{kf / wall:>8.1f}"
-              f"{kf / cpu:>9.1f}{frames / wall:>9.1f}")
-    print(f"speed-up vs naive @ keyframes (same input): {wall_k / wall_s:.2f}x wall, {cpu_k / cpu_s:.2f}x CPU time; "
-          f"events/s ratio {(n_s / wall_s) / (n_k / wall_k):.2f}x wall, {(n_s / cpu_s) / (n_k / cpu_k):.2f}x CPU")
-    print(f"speed-up vs naive @ tau/4 (same interval):  {wall_f / wall_ss:.2f}x wall, {cpu_f / cpu_ss:.2f}x CPU time; "
-          f"events/s ratio {(n_ss / wall_ss) / (n_f / wall_f):.2f}x wall, {(n_ss / cpu_ss) / (n_f / cpu_f):.2f}x CPU")
+    window_s = 100e-6
+    rows, speedups = work_precision(args.wp_size, args.wp_keyframes, args.rate, args.lux, window_s, args.repeat,
+                                    args.plot or None)
+    print(f"2. work-precision: {args.wp_size}x{args.wp_size} px, {args.wp_keyframes} keyframes, deterministic core, "
+          f"one core each, best of {args.repeat}; error = event-count error against simspad at tolerance 1e-5")
+    print(f"{'contender':<13}{'setting':>9}{'cpu s':>8}{'events':>9}{'err 100us':>11}{'err 1ms':>9}")
+    for name, setting, cpu, n, err, err_ms in rows:
+        print(f"{name:<13}{setting:>9g}{cpu:>8.3f}{n:>9d}{err:>11.4f}{err_ms:>9.4f}")
+    default_tol = EventParams().substep_tolerance
+    for name, (ratio, bound) in speedups.items():
+        print(f"speed-up at equal accuracy (simspad default substep_tolerance {default_tol:g}) vs {name}: "
+              f"{'>' if bound else ''}{ratio:.1f}x CPU time")
+    if args.plot:
+        print(f"work-precision diagram: {args.plot}")
     if args.memory:
-        print("streaming to HDF5 from a render directory (fresh process each; peak resident memory):")
+        print("3. streaming to HDF5 from a render directory (fresh process each; peak resident memory):")
         for n, n_events, mib in streaming_memory(args.memory_size, (args.keyframes, 4 * args.keyframes), args.rate):
             print(f"  {args.memory_size}x{args.memory_size} px, {n:5d} keyframes: {n_events:9d} events, "
                   f"peak RSS {mib:7.1f} MiB")
