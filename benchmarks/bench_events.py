@@ -14,7 +14,7 @@ Two comparisons:
    the CPU-time ratio is the work done and the wall-time ratio the user's view on this machine. The two do *not*
    produce the same events: at keyframe spacing the reference's low-pass and linear crossing interpolation are
    far off (see 2), while SimSPAD integrates each pixel exactly with adaptive internal steps.
-2. **Work–precision** (``--wp-size``, ``--wp-keyframes``): accuracy against CPU time (one core each) on the
+2. **Work–precision** (``--wp-size``, ``--wp-keyframes``, ``--wp-lux``): accuracy against CPU time (one core each) on the
    deterministic core of the model (noise, leak, latency, jitter and refractory period off, so events are a
    function of the input). Accuracy is the event-count error per pixel, polarity and 100 µs window against a
    converged solution (SimSPAD at ``substep_tolerance = 1e-5``); the per-frame reference converges to the same
@@ -205,8 +205,7 @@ def _interp_cost(costs, errors, target):
     return float(c[0]), False
 
 
-def work_precision(size: int, n_keyframes: int, rate_hz: float, lux: float, window_s: float, repeat: int,
-                   plot_path=None):
+def work_precision(size: int, n_keyframes: int, rate_hz: float, lux: float, window_s: float, repeat: int):
     """Work-precision comparison: accuracy against CPU time for SimSPAD (over ``substep_tolerance``) and the
     per-frame reference (over frames per keyframe interval, both low-pass updates), on the deterministic core.
 
@@ -249,28 +248,36 @@ def work_precision(size: int, n_keyframes: int, rate_hz: float, lux: float, wind
         cr = [r for r in rows if r[0] == name]
         cost, bound = _interp_cost([r[2] for r in cr], [r[4] for r in cr], mine[4])
         speedups[name] = (cost / mine[2], bound)
-    if plot_path is not None:
-        import matplotlib
+    return rows, speedups
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
 
-        fig, ax = plt.subplots(figsize=(6.4, 4.4))
+def plot_work_precision(results: dict, size: int, n_keyframes: int, window_s: float, path) -> None:
+    """One work-precision panel per lux level; ``results[lux] = (rows, speedups)`` of :func:`work_precision`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    default_tol = EventParams().substep_tolerance
+    fig, axes = plt.subplots(1, len(results), figsize=(4.6 * len(results), 4.4), squeeze=False)
+    for ax, (lux, (rows, speedups)) in zip(axes[0], sorted(results.items())):
         for name, marker in (("simspad", "o"), ("naive-euler", "s"), ("naive-exp", "^")):
             cr = [r for r in rows if r[0] == name]
             ax.loglog([r[2] for r in cr], [r[4] for r in cr], marker=marker, label=name)
             for r in cr:
                 ax.annotate(f"{r[1]:g}", (r[2], r[4]), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        mine = next(r for r in rows if r[0] == "simspad" and r[1] == default_tol)
         ax.axhline(mine[4], color="grey", lw=0.8, ls=":")
         ax.set_xlabel("CPU time, s (one core)")
         ax.set_ylabel(f"event-count error in {window_s * 1e6:.0f} µs windows")
-        ax.set_title(f"work-precision, {size}x{size} px, {n_keyframes} keyframes, {lux:g} lx\n"
-                     "labels: substep_tolerance (simspad), frames per keyframe interval (naive)", fontsize=9)
-        ax.legend()
-        fig.tight_layout()
-        fig.savefig(plot_path, dpi=110)
-        plt.close(fig)
-    return rows, speedups
+        ax.set_title(f"{lux:g} lx: {speedups['naive-exp'][0]:.0f}x (exp), {speedups['naive-euler'][0]:.0f}x (Euler) "
+                     "at equal accuracy", fontsize=9)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"work-precision, {size}x{size} px, {n_keyframes} keyframes; labels: substep_tolerance (simspad), "
+                 "frames per keyframe interval (naive)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 _STREAM_CHILD = """
@@ -321,6 +328,8 @@ def main(argv=None):
     parser.add_argument("--repeat", type=int, default=3, help="runs per contender; the fastest is reported")
     parser.add_argument("--wp-size", type=int, default=128, help="work-precision scene width = height, pixels")
     parser.add_argument("--wp-keyframes", type=int, default=21)
+    parser.add_argument("--wp-lux", type=float, nargs="+", default=[10.0, 100.0, 1000.0],
+                        help="lux levels of the work-precision comparison")
     parser.add_argument("--plot", default=str(Path(__file__).parent / "results" / "bench_events.png"),
                         help="work-precision diagram (PNG); '' for none")
     parser.add_argument("--memory", action=argparse.BooleanOptionalAction, default=True,
@@ -354,18 +363,22 @@ def main(argv=None):
     print(f"speed-up (same input, different accuracy): {wall_k / wall_s:.2f}x wall, {cpu_k / cpu_s:.2f}x CPU time")
 
     window_s = 100e-6
-    rows, speedups = work_precision(args.wp_size, args.wp_keyframes, args.rate, args.lux, window_s, args.repeat,
-                                    args.plot or None)
-    print(f"2. work-precision: {args.wp_size}x{args.wp_size} px, {args.wp_keyframes} keyframes, deterministic core, "
-          f"one core each, best of {args.repeat}; error = event-count error against simspad at tolerance 1e-5")
-    print(f"{'contender':<13}{'setting':>9}{'cpu s':>8}{'events':>9}{'err 100us':>11}{'err 1ms':>9}")
-    for name, setting, cpu, n, err, err_ms in rows:
-        print(f"{name:<13}{setting:>9g}{cpu:>8.3f}{n:>9d}{err:>11.4f}{err_ms:>9.4f}")
     default_tol = EventParams().substep_tolerance
-    for name, (ratio, bound) in speedups.items():
-        print(f"speed-up at equal accuracy (simspad default substep_tolerance {default_tol:g}) vs {name}: "
-              f"{'>' if bound else ''}{ratio:.1f}x CPU time")
+    results = {}
+    for lux in args.wp_lux:
+        rows, speedups = results[lux] = work_precision(args.wp_size, args.wp_keyframes, args.rate, lux, window_s,
+                                                       args.repeat)
+        print(f"2. work-precision at {lux:g} lx: {args.wp_size}x{args.wp_size} px, {args.wp_keyframes} keyframes, "
+              f"deterministic core, one core each, best of {args.repeat}; error = event-count error against simspad "
+              "at tolerance 1e-5")
+        print(f"{'contender':<13}{'setting':>9}{'cpu s':>8}{'events':>9}{'err 100us':>11}{'err 1ms':>9}")
+        for name, setting, cpu, n, err, err_ms in rows:
+            print(f"{name:<13}{setting:>9g}{cpu:>8.3f}{n:>9d}{err:>11.4f}{err_ms:>9.4f}")
+        for name, (ratio, bound) in speedups.items():
+            print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance {default_tol:g}) vs "
+                  f"{name}: {'>' if bound else ''}{ratio:.1f}x CPU time")
     if args.plot:
+        plot_work_precision(results, args.wp_size, args.wp_keyframes, window_s, args.plot)
         print(f"work-precision diagram: {args.plot}")
     if args.memory:
         print("3. streaming to HDF5 from a render directory (fresh process each; peak resident memory):")
