@@ -35,9 +35,12 @@ Randomness: one splitmix64 stream per pixel, seeded from the sensor's ``rng``, s
 chunking, on the pixel blocks or on the thread count; jitter draws are normal quantiles of one uniform each
 (Acklam's approximation, relative error < 1.2·10⁻⁹). Events stream out in time chunks, sorted by (µs timestamp,
 pixel index): the kernel emits them in pixel order (time and a packed pixel/polarity/label code), so one stable
-counting sort over µs buckets orders a chunk, and a linear merge joins it to the events held back from the
-previous one; events read out after the recording's end are dropped. A pixel block whose buffer slice fills up
-continues from the pixel that did not fit in a larger slice, so no finished work is redone.
+counting sort over µs buckets orders a chunk. It runs in parallel on equal slices of that sequence, one histogram
+each, with the bucket rows handed out in (bucket, slice) order: the rows a serial pass gives, whatever the thread
+count. The events held back from the previous chunk (read out after its end, so few) are merged into rows left
+free in front of the new ones, touching only the new events that sort before the last of them; events read out
+after the recording's end are dropped. A pixel block whose buffer slice fills up continues from the pixel that
+did not fit in a larger slice, so no finished work is redone.
 
 Cost: an internal step costs one exp and no log (a step cut by the tolerance rule advances ln I by a per-pixel
 constant; ln I at keyframes is taken once per pixel and keyframe); a crossing costs about two exp (Halley
@@ -71,6 +74,8 @@ CHUNK_BYTES = 64 << 20
 CHUNK_PIECES = 16
 #: Events written per HDF5 chunk.
 EVENT_CHUNK_ROWS = 1 << 16
+#: Histogram entries (µs buckets × parts) the parallel bucket sort may hold; it uses fewer parts beyond this.
+_BUCKET_MAX_ENTRIES = 8 << 20
 #: Extra blind time after the refractory period, so µs-floored timestamps keep ≥ refractory_s spacing.
 _REFRACTORY_GUARD_S = 1e-9
 
@@ -319,21 +324,29 @@ def _pack(pixel, polarity, label):
     return (np.int64(pixel) << 3) | (np.int64(polarity) << 2) | np.int64(label)
 
 
-@numba.njit(cache=True)
-def _unpack(t_s, code):
-    """``(t_us, pixel, polarity, label)`` of events given as time (s) and packed code (one sequential pass)."""
-    n = code.size
+@numba.njit(cache=True, parallel=True)
+def _unpack(t_s, pix, lo):
+    """Unpack rows ``lo …`` of events given as time (s) and packed code, in parallel; ``pix`` holds the codes on
+    entry and the pixel indices on return (no separate code array to allocate and fault in).
+
+    Returns
+    -------
+    t_us, pol, lab : ndarray
+        µs timestamps (floor of t·10⁶, as :func:`timestamps_us`), polarity and label. Rows before ``lo`` are left
+        uninitialised: they are the room :meth:`EventSimulator.advance` merges the held-back events into.
+    """
+    n = pix.size
     t_us = np.empty(n, np.int64)
-    pix = np.empty(n, np.int64)
     pol = np.empty(n, np.uint8)
     lab = np.empty(n, np.uint8)
-    for k in range(n):
+    for j in numba.prange(n - lo):
+        k = lo + j
         t_us[k] = np.int64(math.floor(t_s[k] * 1e6))
-        c = code[k]
+        c = pix[k]
         pix[k] = c >> 3
         pol[k] = np.uint8((c >> 2) & 1)
         lab[k] = np.uint8(c & 3)
-    return t_us, pix, pol, lab
+    return t_us, pol, lab
 
 
 @numba.njit(cache=True)
@@ -590,88 +603,161 @@ def _simulate_blocks(pix_lo, pix_hi, starts, limits, knot_t, knot_current, th_on
     return ends, p_next
 
 
+# Post-processing runs on "parts": the blocks' events read in block (= pixel) order form one virtual sequence
+# (row v of the sequence lies in segment s with offsets[s] ≤ v < offsets[s+1]), cut into n_parts equal slices,
+# one per thread (fewer if their histograms would be large). The slices balance the work whatever the blocks'
+# sizes, and the result does not depend on how the sequence is cut, so it does not depend on the thread count.
 @numba.njit(cache=True)
-def _us_range(starts, ends, buf_t):
-    """(smallest, largest) µs timestamp of the blocks' events (floor of t·10⁶, as :func:`timestamps_us`)."""
+def _offsets(starts, ends):
+    """Exclusive prefix sum of the segments' event counts (``n_seg + 1`` entries, the last = all events)."""
+    offsets = np.empty(starts.size + 1, np.int64)
+    offsets[0] = 0
+    for s in range(starts.size):
+        offsets[s + 1] = offsets[s] + ends[s] - starts[s]
+    return offsets
+
+
+@numba.njit(cache=True, inline="always")
+def _part(offsets, n_parts, p):
+    """Virtual rows ``[v0, v1)`` of part ``p`` and the segment to start reading at (the last one whose first
+    row is ≤ ``v0``; segments are read on while they start before ``v1``)."""
+    n = offsets[-1]
+    v0 = n * p // n_parts
+    v1 = n * (p + 1) // n_parts
+    return v0, v1, np.searchsorted(offsets, v0, side="right") - 1
+
+
+@numba.njit(cache=True)
+def _part_range(starts, offsets, buf_t, v0, v1, s):
+    """(smallest, largest) µs timestamp of virtual rows ``[v0, v1)``, ``s`` as from :func:`_part`."""
     lo = np.iinfo(np.int64).max
     hi = np.iinfo(np.int64).min
-    for b in range(starts.size):
-        for i in range(starts[b], ends[b]):
-            u = np.int64(math.floor(buf_t[i] * 1e6))
+    while s < starts.size and offsets[s] < v1:
+        base = starts[s] - offsets[s]
+        for v in range(max(v0, offsets[s]), min(v1, offsets[s + 1])):
+            u = np.int64(math.floor(buf_t[base + v] * 1e6))
             lo = min(lo, u)
             hi = max(hi, u)
+        s += 1
     return lo, hi
 
 
+@numba.njit(cache=True, parallel=True)
+def _us_range(starts, ends, buf_t, n_parts):
+    """(smallest, largest) µs timestamp of the blocks' events (floor of t·10⁶, as :func:`timestamps_us`)."""
+    offsets = _offsets(starts, ends)
+    lo = np.empty(n_parts, np.int64)
+    hi = np.empty(n_parts, np.int64)
+    for p in numba.prange(n_parts):
+        v0, v1, s = _part(offsets, n_parts, p)
+        lo[p], hi[p] = _part_range(starts, offsets, buf_t, v0, v1, s)
+    return lo.min(), hi.max()
+
+
 @numba.njit(cache=True)
-def _bucket_blocks(starts, ends, buf_t, buf_code, t_lo, span):
+def _part_histogram(starts, offsets, buf_t, v0, v1, s, t_lo, count):
+    """Add the events of virtual rows ``[v0, v1)`` to ``count`` (one entry per µs from ``t_lo``)."""
+    while s < starts.size and offsets[s] < v1:
+        base = starts[s] - offsets[s]
+        for v in range(max(v0, offsets[s]), min(v1, offsets[s + 1])):
+            count[np.int64(math.floor(buf_t[base + v] * 1e6)) - t_lo] += 1
+        s += 1
+
+
+@numba.njit(cache=True)
+def _part_scatter(starts, offsets, buf_t, buf_code, v0, v1, s, t_lo, next_row, t_out, code_out):
+    """Move the events of virtual rows ``[v0, v1)`` to their sorted rows; ``next_row[u]`` is the next free row
+    of µs bucket ``u`` reserved for this part (advanced as rows are taken)."""
+    while s < starts.size and offsets[s] < v1:
+        base = starts[s] - offsets[s]
+        for v in range(max(v0, offsets[s]), min(v1, offsets[s + 1])):
+            i = base + v
+            u = np.int64(math.floor(buf_t[i] * 1e6)) - t_lo
+            k = next_row[u]
+            next_row[u] = k + 1
+            t_out[k] = buf_t[i]
+            code_out[k] = buf_code[i]
+        s += 1
+
+
+@numba.njit(cache=True, parallel=True)
+def _bucket_blocks(starts, ends, buf_t, buf_code, t_lo, span, n_parts, lead):
     """The blocks' events sorted by (µs timestamp, pixel) with one stable counting sort over µs buckets.
 
     Blocks cover increasing pixel ranges and each pixel's events are in time order, so reading the blocks in
-    order already gives pixel order inside every µs bucket: a single pass suffices. Only the time and the
-    packed code are scattered; the other columns are unpacked afterwards in one sequential pass.
+    order already gives pixel order inside every µs bucket: a stable sort by µs alone suffices. It runs in
+    parallel over ``n_parts`` parts of that sequence (one histogram of ``span`` buckets each): the bucket rows are
+    handed out in (bucket, part) order, so each part fills its share of a bucket after the earlier parts and in
+    its own order, the same rows a serial pass gives. Only the time and the packed code are scattered; the other
+    columns are unpacked afterwards in one parallel pass over the sorted rows.
+
+    Returns
+    -------
+    t_s, t_us, pixel, polarity, label : ndarray
+        ``lead`` + number of events rows; the sorted events fill rows ``lead …``, the first ``lead`` rows are
+        left uninitialised (room for the held-back events, see :meth:`EventSimulator.advance`).
     """
-    n = 0
-    for b in range(starts.size):
-        n += ends[b] - starts[b]
-    count = np.zeros(span + 1, np.int64)
-    for b in range(starts.size):
-        for i in range(starts[b], ends[b]):
-            count[np.int64(math.floor(buf_t[i] * 1e6)) - t_lo + 1] += 1
-    for j in range(span):
-        count[j + 1] += count[j]
-    t_s = np.empty(n, np.float64)
-    code = np.empty(n, np.int64)
-    for b in range(starts.size):
-        for i in range(starts[b], ends[b]):
-            u = np.int64(math.floor(buf_t[i] * 1e6)) - t_lo
-            k = count[u]
-            count[u] = k + 1
-            t_s[k] = buf_t[i]
-            code[k] = buf_code[i]
-    t_us, pix, pol, lab = _unpack(t_s, code)
+    offsets = _offsets(starts, ends)
+    n = offsets[-1]
+    count = np.zeros((n_parts, span), np.int64)
+    for p in numba.prange(n_parts):
+        v0, v1, s = _part(offsets, n_parts, p)
+        _part_histogram(starts, offsets, buf_t, v0, v1, s, t_lo, count[p])
+    k = lead
+    for u in range(span):  # exclusive prefix sum in (bucket, part) order: each part's first row per bucket
+        for p in range(n_parts):
+            c = count[p, u]
+            count[p, u] = k
+            k += c
+    t_s = np.empty(lead + n, np.float64)
+    pix = np.empty(lead + n, np.int64)  # packed codes until unpacked in place
+    for p in numba.prange(n_parts):
+        v0, v1, s = _part(offsets, n_parts, p)
+        _part_scatter(starts, offsets, buf_t, buf_code, v0, v1, s, t_lo, count[p], t_s, pix)
+    t_us, pol, lab = _unpack(t_s, pix, lead)
     return t_s, t_us, pix, pol, lab
 
 
 @numba.njit(cache=True)
-def _merge_sorted(a_t, a_us, a_pix, a_pol, a_lab, b_t, b_us, b_pix, b_pol, b_lab):
-    """Merge two event sets each sorted by (µs, pixel); on a full tie ``a`` (the earlier chunk) comes first."""
-    n = a_t.size + b_t.size
-    t_s = np.empty(n, np.float64)
-    t_us = np.empty(n, np.int64)
-    pix = np.empty(n, np.int64)
-    pol = np.empty(n, np.uint8)
-    lab = np.empty(n, np.uint8)
+def _merge_front(a_t, a_us, a_pix, a_pol, a_lab, t_s, t_us, pix, pol, lab):
+    """Merge the events ``a`` into the front of ``t_s …``, in place; both sorted by (µs, pixel), on a full tie
+    ``a`` (the earlier chunk) comes first.
+
+    The first ``a_t.size`` rows of ``t_s …`` are free, the rest hold the new events. Rows are written from the
+    front and the write row never passes the next unread new event, so no copy is needed; once ``a`` is used up
+    the remaining new events are already in place. Cost: ``a`` plus the new events that sort before its last.
+    """
+    na = a_t.size
+    n = t_s.size
     i = 0
-    j = 0
-    for k in range(n):
-        take_a = j >= b_t.size or (i < a_t.size and (a_us[i] < b_us[j] or (a_us[i] == b_us[j]
-                                                                           and a_pix[i] <= b_pix[j])))
-        if take_a:
+    j = na
+    k = 0
+    while i < na:
+        if j < n and (t_us[j] < a_us[i] or (t_us[j] == a_us[i] and pix[j] < a_pix[i])):
+            t_s[k], t_us[k], pix[k], pol[k], lab[k] = t_s[j], t_us[j], pix[j], pol[j], lab[j]
+            j += 1
+        else:
             t_s[k], t_us[k], pix[k], pol[k], lab[k] = a_t[i], a_us[i], a_pix[i], a_pol[i], a_lab[i]
             i += 1
-        else:
-            t_s[k], t_us[k], pix[k], pol[k], lab[k] = b_t[j], b_us[j], b_pix[j], b_pol[j], b_lab[j]
-            j += 1
-    return t_s, t_us, pix, pol, lab
+        k += 1
 
 
 @numba.njit(cache=True)
 def _gather(starts, ends, buf_t, buf_code):
-    """Concatenate the blocks' events in block (= pixel) order: ``(t_s, pixel, polarity, label)``."""
+    """Concatenate the blocks' events in block (= pixel) order: ``(t_s, t_us, pixel, polarity, label)``."""
     n = 0
     for b in range(starts.size):
         n += ends[b] - starts[b]
     t = np.empty(n, np.float64)
-    code = np.empty(n, np.int64)
+    pix = np.empty(n, np.int64)
     k = 0
     for b in range(starts.size):
         for i in range(starts[b], ends[b]):
             t[k] = buf_t[i]
-            code[k] = buf_code[i]
+            pix[k] = buf_code[i]
             k += 1
-    _, pix, pol, lab = _unpack(t, code)
-    return t, pix, pol, lab
+    t_us, pol, lab = _unpack(t, pix, 0)
+    return t, t_us, pix, pol, lab
 
 
 def sort_events(t_us: np.ndarray, pixel: np.ndarray, n_pix: int) -> np.ndarray:
@@ -731,9 +817,12 @@ class EventSimulator:
             Events whose µs timestamp lies before the µs holding ``knot_t[-1]``, sorted by (t_us, pixel);
             later ones are held back and merged with the next chunk, so the order does not depend on chunking.
         """
-        new = self._run_chunk(np.ascontiguousarray(knot_t, dtype=np.float64),
-                              np.ascontiguousarray(np.asarray(knot_current, np.float64).T))
-        merged = _merge_sorted(*self._pending, *new) if self._pending[0].size else new
+        pending = self._pending
+        merged = self._run_chunk(np.ascontiguousarray(knot_t, dtype=np.float64),
+                                 np.ascontiguousarray(np.asarray(knot_current, np.float64).T), pending[0].size)
+        # The held-back events are few (read out after the previous chunk's end): they are merged into the rows
+        # left free in front of the new ones, touching only the new events that sort before the last of them.
+        _merge_front(*pending, *merged)
         cut = int(np.searchsorted(merged[1], timestamps_us(knot_t[-1]), side="left"))
         self._pending = tuple(a[cut:].copy() for a in merged)
         return tuple(a[:cut] for a in merged)
@@ -744,8 +833,9 @@ class EventSimulator:
             self._buf = (np.empty(size, np.float64), np.empty(size, np.int64))
         return self._buf
 
-    def _run_chunk(self, knot_t, knot_current):
-        """All pixels over one chunk, in parallel pixel blocks, sorted by (µs, pixel).
+    def _run_chunk(self, knot_t, knot_current, lead: int = 0):
+        """All pixels over one chunk, in parallel pixel blocks, sorted by (µs, pixel), after ``lead`` rows left
+        uninitialised (room for :func:`_merge_front`).
 
         A block that fills its buffer slice stops at the pixel that did not fit (that pixel's state untouched);
         the rest of the block continues in a fresh, larger slice (per-pixel random streams make the result the
@@ -794,16 +884,21 @@ class EventSimulator:
         per_block = np.bincount(np.concatenate(seg_block)[order], weights=counts, minlength=n_blocks)
         self._cap = max(1024, int(per_block.max()) * n_blocks)
         buf = self._buf
+        n_threads = numba.get_num_threads()
         if counts.sum() == 0:
-            return tuple(a[:0] for a in self._pending)
-        t_lo, t_hi = _us_range(starts, ends, buf[0])
+            return tuple(np.empty(lead, a.dtype) for a in self._pending)
+        t_lo, t_hi = _us_range(starts, ends, buf[0], n_threads)
         span = t_hi - t_lo + 1
         if span <= 4 * int(counts.sum()) + (1 << 20):
-            return _bucket_blocks(starts, ends, *buf, t_lo, span)
-        t_s, pixel, pol, label = _gather(starts, ends, *buf)  # sparse events over a long chunk: comparison sort
-        t_us = timestamps_us(t_s)
-        order = sort_events(t_us, pixel, n_pix)
-        return t_s[order], t_us[order], pixel[order], pol[order], label[order]
+            # One histogram of span buckets per part: fewer parts (down to one, a serial pass) when that is large.
+            n_parts = max(1, min(n_threads, _BUCKET_MAX_ENTRIES // span))
+            return _bucket_blocks(starts, ends, *buf, t_lo, span, n_parts, lead)
+        sparse = _gather(starts, ends, *buf)  # sparse events over a long chunk: comparison sort
+        order = sort_events(sparse[1], sparse[2], n_pix)
+        out = tuple(np.empty(lead + order.size, a.dtype) for a in sparse)
+        for a, b in zip(out, sparse):
+            a[lead:] = b[order]
+        return out
 
     def finish(self):
         """The events still held back (sorted)."""
