@@ -45,6 +45,10 @@ from simspad.sensors.presets import EventParams
 from simspad.timeline import Timeline
 
 
+#: SimSPAD's default internal step tolerance: the accuracy its speed is compared at.
+DEFAULT_TOLERANCE = EventParams().substep_tolerance
+
+
 def make_timeline(size: int, n_keyframes: int, rate_hz: float, lux: float, flow_px: float = 0.5,
                   seed: int = 0) -> Timeline:
     """A smooth random texture panning ``flow_px`` pixels per keyframe (the renderer's default adaptive-keyframe
@@ -241,8 +245,7 @@ def work_precision(size: int, n_keyframes: int, rate_hz: float, lux: float, wind
                              count_error(ev, ref, n_pix, t_end, 1e-3)))
     finally:
         numba.set_num_threads(threads)
-    default_tol = EventParams().substep_tolerance
-    mine = next(r for r in rows if r[0] == "simspad" and r[1] == default_tol)
+    mine = next(r for r in rows if r[0] == "simspad" and r[1] == DEFAULT_TOLERANCE)
     speedups = {}
     for name in ("naive-euler", "naive-exp"):
         cr = [r for r in rows if r[0] == name]
@@ -258,7 +261,6 @@ def plot_work_precision(results: dict, size: int, n_keyframes: int, window_s: fl
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    default_tol = EventParams().substep_tolerance
     fig, axes = plt.subplots(1, len(results), figsize=(4.6 * len(results), 4.4), squeeze=False)
     for ax, (lux, (rows, speedups)) in zip(axes[0], sorted(results.items())):
         for name, marker in (("simspad", "o"), ("naive-euler", "s"), ("naive-exp", "^")):
@@ -266,7 +268,7 @@ def plot_work_precision(results: dict, size: int, n_keyframes: int, window_s: fl
             ax.loglog([r[2] for r in cr], [r[4] for r in cr], marker=marker, label=name)
             for r in cr:
                 ax.annotate(f"{r[1]:g}", (r[2], r[4]), textcoords="offset points", xytext=(4, 4), fontsize=7)
-        mine = next(r for r in rows if r[0] == "simspad" and r[1] == default_tol)
+        mine = next(r for r in rows if r[0] == "simspad" and r[1] == DEFAULT_TOLERANCE)
         ax.axhline(mine[4], color="grey", lw=0.8, ls=":")
         ax.set_xlabel("CPU time, s (one core)")
         ax.set_ylabel(f"event-count error in {window_s * 1e6:.0f} µs windows")
@@ -363,7 +365,6 @@ def main(argv=None):
     print(f"speed-up (same input, different accuracy): {wall_k / wall_s:.2f}x wall, {cpu_k / cpu_s:.2f}x CPU time")
 
     window_s = 100e-6
-    default_tol = EventParams().substep_tolerance
     results = {}
     for lux in args.wp_lux:
         rows, speedups = results[lux] = work_precision(args.wp_size, args.wp_keyframes, args.rate, lux, window_s,
@@ -375,7 +376,7 @@ def main(argv=None):
         for name, setting, cpu, n, err, err_ms in rows:
             print(f"{name:<13}{setting:>9g}{cpu:>8.3f}{n:>9d}{err:>11.4f}{err_ms:>9.4f}")
         for name, (ratio, bound) in speedups.items():
-            print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance {default_tol:g}) vs "
+            print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance {DEFAULT_TOLERANCE:g}) vs "
                   f"{name}: {'>' if bound else ''}{ratio:.1f}x CPU time")
     if args.plot:
         plot_work_precision(results, args.wp_size, args.wp_keyframes, window_s, args.plot)
