@@ -376,8 +376,8 @@ def main(argv=None):
         for name, setting, cpu, n, err, err_ms in rows:
             print(f"{name:<13}{setting:>9g}{cpu:>8.3f}{n:>9d}{err:>11.4f}{err_ms:>9.4f}")
         for name, (ratio, bound) in speedups.items():
-            print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance {DEFAULT_TOLERANCE:g}) vs "
-                  f"{name}: {'>' if bound else ''}{ratio:.1f}x CPU time")
+            print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance "
+                  f"{DEFAULT_TOLERANCE:g}) vs {name}: {'>' if bound else ''}{ratio:.1f}x CPU time")
     if args.plot:
         plot_work_precision(results, args.wp_size, args.wp_keyframes, window_s, args.plot)
         print(f"work-precision diagram: {args.plot}")
