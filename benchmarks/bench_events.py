@@ -39,10 +39,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from simspad.radiometry import flux_scale
+from simspad.physics.radiometry import flux_scale
 from simspad.sensors import events
 from simspad.sensors.presets import EventParams
-from simspad.timeline import Timeline
+from simspad.radiance.timeline import Timeline
 
 
 #: SimSPAD's default internal step tolerance: the accuracy its speed is compared at.
@@ -287,7 +287,7 @@ import sys, numpy as np
 from simspad.io.recording import RecordingWriter
 from simspad.sensors import events
 from simspad.sensors.presets import EventParams
-from simspad.timeline import Timeline
+from simspad.radiance.timeline import Timeline
 tl = Timeline.open(sys.argv[1]).photon_flux(1000.0)
 with RecordingWriter(sys.argv[2], {"width": tl.width, "height": tl.height, "duration_s": tl.t_end, "lux": 1000.0}) as w:
     a = events.simulate_events(w, tl, tl.t_start, tl.t_end, EventParams(), np.random.default_rng(0), 1000.0)
@@ -306,7 +306,7 @@ def streaming_memory(size: int, lengths: tuple[int, ...], rate_hz: float) -> lis
     import sys
     import tempfile
 
-    from simspad.timeline import write_render_dir
+    from simspad.radiance.timeline import write_render_dir
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

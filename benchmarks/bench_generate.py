@@ -38,10 +38,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from simspad.executors import default_workers, job_environment  # noqa: E402
-from simspad.jobs import generate, make_plan  # noqa: E402
-from simspad.manifest import read_manifest  # noqa: E402
-from simspad.spec import load_spec, spec_from_dict  # noqa: E402
+from simspad.dataset.executors import default_workers, job_environment  # noqa: E402
+from simspad.dataset.jobs import generate, make_plan  # noqa: E402
+from simspad.io.manifest import read_manifest  # noqa: E402
+from simspad.dataset.spec import load_spec, spec_from_dict  # noqa: E402
 
 GIB = 1024**3
 
@@ -131,7 +131,7 @@ def _render(seq, out: Path, resolution, duration_s: float, seed: int = 1):
 def _timed_sim(render_dir: Path, out: Path, kinds, params: dict, lux: float, start_s: float, duration_s: float,
                reps: int = 2) -> tuple[float, Path]:
     """Best of ``reps`` wall times of a simulation with only ``kinds`` (ground truth always runs)."""
-    from simspad.radiometry import Optics
+    from simspad.physics.radiometry import Optics
     from simspad.sensors.simulate import simulate_recording
 
     best = math.inf

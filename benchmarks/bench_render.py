@@ -105,7 +105,7 @@ def pan_trajectory(width: int):
     from scipy.spatial.transform import Rotation
 
     from simspad.render.schedule import focal_length_px
-    from simspad.trajectory import Trajectory, TrajectorySet, look_at
+    from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 
     focal = focal_length_px(FOV_DEG, width)
     x_border = 0.5 * width / focal
@@ -133,16 +133,16 @@ def uniform_timeline(scene, ts, n: int, res, spp, out: Path):
     rate = (n - 1) / DURATION_S * (1 + 1e-9)
     render_sequence(scene, ts, duration_s=DURATION_S, resolution=res, spp=spp, max_flow_px=1e9, min_rate_hz=rate,
                     out_dir=out, progress=False)
-    from simspad.timeline import Timeline
+    from simspad.radiance.timeline import Timeline
 
     return Timeline.open(out)
 
 
 def reference_frames(scene, ts, instants, res, spp, seed=0) -> dict[float, np.ndarray]:
     """Brute-force renders (luminance) at the given instants, same sensor, sampler and seed as the keyframes."""
-    from simspad.radiometry import luminance_from_rgb
+    from simspad.physics.radiometry import luminance_from_rgb
     from simspad.render.renderer import _MitsubaScene, _object_poses, _poses
-    from simspad.scenes import resolve_scene
+    from simspad.scenes.library import resolve_scene
 
     ms = _MitsubaScene(resolve_scene(scene), ts, res[0], res[1], spp)
     refs = {}
@@ -178,7 +178,7 @@ def main(argv=None) -> int:
 
     from simspad.render.renderer import render_sequence, select_variant
     from simspad.render.schedule import SPAD_BIN_S, brute_force_keyframes
-    from simspad.timeline import Timeline
+    from simspad.radiance.timeline import Timeline
 
     variant = select_variant()
     work = Path(tempfile.mkdtemp(prefix="bench_render-"))

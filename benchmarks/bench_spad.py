@@ -31,7 +31,7 @@ import numpy as np
 
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad import SpadChunker, chunk_bins, detection_area_m2, pack_bits
-from simspad.timeline import Timeline
+from simspad.radiance.timeline import Timeline
 
 SWISSSPAD2_GBIT_S = 512 * 512 / 10.24e-6 / 1e9  # 25.6
 
@@ -123,7 +123,7 @@ def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]
 
 def lux_for_probability(p: float, params: SpadParams) -> float:
     """Mid-grey scene illuminance giving mean P(1) = p per 10.24 µs bin with the presets at f/2 (DESIGN §3)."""
-    from simspad.radiometry import flux_scale
+    from simspad.physics.radiometry import flux_scale
 
     rate = -math.log1p(-p) / params.bin_s
     return rate / (flux_scale(1.0, 1.0) * detection_area_m2(params))

@@ -15,7 +15,7 @@ import numpy as np
 from simspad.io.recording import RecordingWriter
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.spad import spad_attrs
-from simspad.spad_statistics import detection_probability
+from simspad.physics.spad_statistics import detection_probability
 
 H, W = 24, 32
 GT_RATE_HZ = 2000.0

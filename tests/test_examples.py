@@ -9,7 +9,7 @@ import numpy as np
 
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.simulate import simulate_recording
-from simspad.timeline import write_render_dir
+from simspad.radiance.timeline import write_render_dir
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -7,9 +7,10 @@ import pytest
 
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
-from simspad.sensors import emva, frame
+from simspad.analysis import emva
+from simspad.sensors import frame
 from simspad.sensors.presets import FrameParams, sensor_params
-from simspad.timeline import Timeline
+from simspad.radiance.timeline import Timeline
 
 SHAPE = (96, 96)
 

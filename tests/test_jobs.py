@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 
 from simspad.errors import InputError, SimSpadError
-from simspad.jobs import DatasetLock, generate, recording_rel_path
-from simspad.manifest import content_sha256, file_sha256, read_manifest
-from simspad.spec import load_spec
+from simspad.dataset.jobs import DatasetLock, generate, recording_rel_path
+from simspad.io.manifest import content_sha256, file_sha256, read_manifest
+from simspad.dataset.spec import load_spec
 
 CREATED = "2025-01-01T00:00:00Z"
 SCENE = "siemens-star"
@@ -104,7 +104,7 @@ def test_generate_writes_complete_dataset(tiny):
     assert sorted(res.done) == sorted(e["path"] for e in m["recordings"]) and not res.skipped
     assert not _temporaries(out)
 
-    from simspad.info import describe
+    from simspad.cli.info import describe
     from simspad.io.recording import open_recording
 
     with open_recording(out / "recordings/a/a_100lx.h5") as rec:

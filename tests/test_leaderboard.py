@@ -12,7 +12,7 @@ import pytest
 from evaluate_helpers import write_dataset, write_submission
 from simspad.cli import main
 from simspad.evaluate import metrics
-from simspad.evaluate.results import read_csv
+from simspad.io.results_dir import read_csv
 
 EVIL = "<script>alert(1)</script>"
 

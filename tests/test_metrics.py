@@ -85,7 +85,7 @@ def test_evaluation_grid_selects_ground_truth_instants():
 
 
 def _star(size=128, cycles=36, shift=(0, 0)):
-    from simspad.scene_assets.textures import siemens_star
+    from simspad.scenes.assets.textures import siemens_star
 
     img = siemens_star(size, cycles)[..., 1]
     return np.roll(img, shift, axis=(0, 1)) * 1e12

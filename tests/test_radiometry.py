@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from colour.constants import CONSTANT_K_M, CONSTANT_LIGHT_SPEED, CONSTANT_PLANCK
 
-from simspad import radiometry as rad
+from simspad.physics import radiometry as rad
 
 
 def _photons_per_lux_reference(name: str) -> float:

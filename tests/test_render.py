@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from simspad import radiometry as rad
+from simspad.physics import radiometry as rad
 from simspad.errors import SimSpadError
 from simspad.io.exr import write_exr
 from simspad.render import schedule as sch
 from simspad.render.renderer import _CompileCounter, render_sequence, select_variant
-from simspad.timeline import Timeline
-from simspad.trajectory import Trajectory, TrajectorySet, linear_pan, look_at, static_pose
+from simspad.radiance.timeline import Timeline
+from simspad.motion.trajectory import Trajectory, TrajectorySet, linear_pan, look_at, static_pose
 
 W, H = 48, 32
 FOV_DEG = 40.0
@@ -292,7 +292,7 @@ def test_scene_loads_list_emitters_in_canonical_order():
     import mitsuba as mi
 
     from simspad.render.renderer import _emitter_order, _load_canonical
-    from simspad.scenes import resolve_scene, scene_dict_or_file
+    from simspad.scenes.library import resolve_scene, scene_dict_or_file
 
     source = scene_dict_or_file(resolve_scene("office"))
     orders = {tuple(_emitter_order(_load_canonical(mi, source, "office"))) for _ in range(8)}

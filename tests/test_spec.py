@@ -13,7 +13,7 @@ import pytest
 from simspad.cli import main
 from simspad.errors import SpecError
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams
-from simspad.spec import (
+from simspad.dataset.spec import (
     DatasetSpec,
     EvaluationSpec,
     default_spec_path,

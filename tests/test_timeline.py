@@ -8,9 +8,9 @@ import OpenEXR
 import pytest
 from scipy.integrate import quad_vec
 
-from simspad import radiometry as rad
+from simspad.physics import radiometry as rad
 from simspad.errors import InputError
-from simspad.timeline import Timeline, write_render_dir
+from simspad.radiance.timeline import Timeline, write_render_dir
 
 H, W = 6, 8
 

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from simspad.cli import main
 from simspad.errors import InputError
-from simspad.trajectory import (
+from simspad.motion.trajectory import (
     Trajectory,
     TrajectorySet,
     handheld_shake,

@@ -34,8 +34,8 @@ def _cage(b, np, metal):
 def build() -> dict:
     import numpy as np
 
-    from simspad.scene_assets import build as b
-    from simspad.scene_assets import meshes, textures
+    from simspad.scenes.assets import build as b
+    from simspad.scenes.assets import meshes, textures
 
     cx, cy, cz = HUB_CENTER
     v, f, uv = meshes.fan_blades(n_blades=5, hub_radius_m=0.035, tip_radius_m=TIP_RADIUS_M, pitch_deg=25.0,

@@ -31,8 +31,8 @@ def _keyboard(b, meshes, np):
 def build() -> dict:
     import numpy as np
 
-    from simspad.scene_assets import build as b
-    from simspad.scene_assets import meshes, textures
+    from simspad.scenes.assets import build as b
+    from simspad.scenes.assets import meshes, textures
 
     # Mitsuba puts a bitmap's first row at v = 0, the bottom of a rectangle: images are flipped to read upright.
     rx = ((1.0, 0.0, 0.0), -90.0)  # rectangle facing +Y (floor-like)

@@ -28,8 +28,8 @@ def _keys(b, meshes):
 
 
 def build() -> dict:
-    from simspad.scene_assets import build as b
-    from simspad.scene_assets import meshes, textures
+    from simspad.scenes.assets import build as b
+    from simspad.scenes.assets import meshes, textures
 
     white, black, kb_w = _keys(b, meshes)
     lacquer = b.smooth_plastic((0.015, 0.012, 0.012))

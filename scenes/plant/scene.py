@@ -38,8 +38,8 @@ def _leaves(meshes, np):
 def build() -> dict:
     import numpy as np
 
-    from simspad.scene_assets import build as b
-    from simspad.scene_assets import meshes, textures
+    from simspad.scenes.assets import build as b
+    from simspad.scenes.assets import meshes, textures
 
     # Mitsuba puts a bitmap's first row at v = 0, the bottom of a rectangle: images are flipped to read upright.
     wall = b.diffuse(b.texture(textures.plaster((256, 256), colour=(0.80, 0.74, 0.62), seed=61, amount=0.3),

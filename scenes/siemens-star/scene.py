@@ -10,8 +10,8 @@ CYCLES = 36
 
 
 def build() -> dict:
-    from simspad.scene_assets import build as b
-    from simspad.scene_assets import meshes, textures
+    from simspad.scenes.assets import build as b
+    from simspad.scenes.assets import meshes, textures
 
     star_v, star_f, star_uv = meshes.disk(STAR_RADIUS_M, segments=720)
     star = b.mesh("star", star_v, star_f, b.diffuse(b.texture(textures.siemens_star(1024, CYCLES))), uv=star_uv)

@@ -3,7 +3,7 @@ r"""Analytic SNR versus photon flux of the three sensors (the reference paper's 
 The common abscissa is the photon irradiance at the sensor plane Φ (photons s⁻¹ m⁻²); each sensor turns it into
 its own per-pixel rate with its pitch, fill factor and quantum efficiency (``simspad.sensors.presets``), exactly as
 the simulator does (DESIGN §3): a pixel detects λ = Φ·pitch²·fill_factor·qe. The top axis gives the scene
-illuminance of a middle-grey scene at f/2 (DESIGN §3 lux convention, ``simspad.radiometry.flux_scale``). All
+illuminance of a middle-grey scene at f/2 (DESIGN §3 lux convention, ``simspad.physics.radiometry.flux_scale``). All
 sensors observe one exposure window T (default 10 ms, the frame camera's ``max_exposure_s``).
 
 Conventional camera (EMVA 1288 Release 4.0, §2 linear model; Ingle et al. 2019 suppl. note 7)::
@@ -126,7 +126,7 @@ def snr_spad_gated_db(flux_ph_s_m2, params: SpadParams | None = None, exposure_s
 
 def reference_flux_1lx() -> float:
     """Sensor-plane photon irradiance of a middle-grey scene at 1 lx (DESIGN §3 defaults), ph s⁻¹ m⁻²."""
-    from simspad.radiometry import flux_scale
+    from simspad.physics.radiometry import flux_scale
 
     return float(flux_scale(1.0, 1.0))
 

@@ -38,7 +38,7 @@ import numpy as np
 from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.evaluate import metrics
-from simspad.evaluate.results import (CROP_PX, check_output_dir, crop, recording_key, save_png, slug,
+from simspad.io.results_dir import (CROP_PX, check_output_dir, crop, recording_key, save_png, slug,
                                       write_results_dir)
 from simspad.io.atomic import atomic_path
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.errors import SimSpadError
-from simspad.evaluate.results import read_csv, slug
+from simspad.io.results_dir import read_csv, slug
 from simspad.io.atomic import atomic_path, ensure_writable_dir
 
 DAGGER = "†"

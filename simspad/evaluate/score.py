@@ -23,7 +23,7 @@ from simspad.evaluate import metrics
 from simspad.evaluate.evaluate import (RecordingEntry, _gt_white_point, evaluation_indices, fill_entry,
                                        list_recordings, protocol_metadata, score_frames, write_images,
                                        DEFAULT_RATE_HZ, _spec_evaluation)
-from simspad.evaluate.results import check_output_dir, write_results_dir
+from simspad.io.results_dir import check_output_dir, write_results_dir
 from simspad.io.atomic import atomic_path
 
 FORMAT = "simspad-submission"

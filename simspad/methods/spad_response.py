@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simspad import spad_statistics as _stats
-from simspad.spad_statistics import detection_probability  # noqa: F401  (re-exported)
+from simspad.physics import spad_statistics as _stats
+from simspad.physics.spad_statistics import detection_probability  # noqa: F401  (re-exported)
 
 # A log estimate from fewer than this many expected detections/electrons is treated as this many: it keeps
 # ln Φ finite for empty pixels and gives them a correspondingly large variance (≈ 1/FLOOR_COUNT).
@@ -76,7 +76,7 @@ def floor_flux(n_bins, q_m2, gate_s):
 
 
 def log_flux_variance(flux_ph_s_m2, n_bins, q_m2, gate_s, dcr_cps=0.0):
-    """Cramér–Rao variance of ln Φ̂ (:func:`simspad.spad_statistics.log_flux_variance`), with irradiances
+    """Cramér–Rao variance of ln Φ̂ (:func:`simspad.physics.spad_statistics.log_flux_variance`), with irradiances
     below :func:`floor_flux` evaluated at the floor."""
     flux = np.maximum(np.asarray(flux_ph_s_m2, dtype=np.float64), floor_flux(n_bins, q_m2, gate_s))
     return _stats.log_flux_variance(flux, n_bins, q_m2, gate_s, dcr_cps)

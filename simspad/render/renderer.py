@@ -28,7 +28,7 @@ from simspad.errors import SimSpadError
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.schedule import (SPAD_BIN_S, brute_force_keyframes, camera_flow_bound, focal_length_px,
                                      keyframe_schedule, object_flow_bound)
-from simspad.timeline import TIMELINE_FILE, write_timeline_json
+from simspad.radiance.timeline import TIMELINE_FILE, write_timeline_json
 
 __all__ = ["RenderSummary", "render_sequence", "select_variant"]
 
@@ -180,7 +180,7 @@ def _remove_created(created: list[Path]) -> None:
 
 
 def _load_trajectory(trajectory, scene_info):
-    from simspad.trajectory import TrajectorySet, load_trajectory
+    from simspad.motion.trajectory import TrajectorySet, load_trajectory
 
     if isinstance(trajectory, TrajectorySet):
         return trajectory, trajectory.source, _trajectory_set_hash(trajectory)
@@ -244,7 +244,7 @@ class _MitsubaScene:
     def __init__(self, info, ts, width: int, height: int, spp: int):
         import mitsuba as mi
 
-        from simspad.scenes import DEFAULT_CAMERA_ID, scene_dict_or_file
+        from simspad.scenes.library import DEFAULT_CAMERA_ID, scene_dict_or_file
 
         self.mi = mi
         where = info.source or info.folder
@@ -461,7 +461,7 @@ def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float
         Bad settings, unknown scene, missing camera id, trajectory not covering the span, unwritable output;
         raised before anything is written.
     """
-    from simspad.scenes import content_hash, resolve_scene
+    from simspad.scenes.library import content_hash, resolve_scene
 
     width, height = _check_settings(duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed)
     spp, seed, max_flow_px, min_rate_hz = int(spp), int(seed), float(max_flow_px), float(min_rate_hz)

@@ -62,7 +62,7 @@ import numba
 import numpy as np
 
 from simspad.errors import SimSpadError
-from simspad.radiometry import detection_rate
+from simspad.physics.radiometry import detection_rate
 from simspad.sensors.presets import EventParams, params_to_attrs
 
 LABEL_SIGNAL, LABEL_SHOT, LABEL_LEAK, LABEL_HOT = 0, 1, 2, 3

@@ -1,6 +1,6 @@
 """Simulate sensors on a render directory and write one recording (DESIGN §1, §5, §6 ``simspad simulate``).
 
-Flow: open the render directory as a :class:`~simspad.timeline.Timeline`; scale it to sensor-plane photon
+Flow: open the render directory as a :class:`~simspad.radiance.timeline.Timeline`; scale it to sensor-plane photon
 irradiance so that the first keyframe's mean luminance corresponds to the lux level (DESIGN §3); run each
 requested sensor on ``[start_s, start_s + duration_s]`` with its own random stream
 ``child_rng(seed, *stream_key, kind)``; write the ground truth; all inside one
@@ -21,11 +21,11 @@ import numpy as np
 from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter
-from simspad.radiometry import Optics
-from simspad.seeding import child_rng
+from simspad.physics.radiometry import Optics
+from simspad.physics.seeding import child_rng
 from simspad.sensors.ground_truth import write_ground_truth
 from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs, sensor_params
-from simspad.timeline import Timeline
+from simspad.radiance.timeline import Timeline
 
 #: Instants this close beyond the render's last keyframe are accepted (round-off of start + duration).
 _TIME_TOLERANCE_S = 1e-9

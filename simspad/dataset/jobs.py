@@ -1,6 +1,6 @@
 """Dataset generation (``simspad generate``): render each sequence once, simulate every sequence × lux.
 
-The job is a small dependency graph run by an executor (:mod:`simspad.executors`): one render per sequence
+The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`): one render per sequence
 (shared by all lux levels and sensors) into ``<out>/renders/<sequence>-<hash>/``, then one simulation per
 (sequence, lux) into ``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. The driver (this module, in the
 calling process) is the only writer of ``manifest.json``, which it rewrites atomically as results arrive.
@@ -36,7 +36,7 @@ from typing import Any, Callable
 from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.io.atomic import ensure_writable_dir
-from simspad.manifest import (FORMAT, VERSION, manifest_path, read_manifest, recording_is_complete, utc_now,
+from simspad.io.manifest import (FORMAT, VERSION, manifest_path, read_manifest, recording_is_complete, utc_now,
                               write_manifest)
 
 LOCK_NAME = ".simspad.lock"
@@ -56,7 +56,7 @@ _TMP_NAME = re.compile(r"^\..+\.tmp-\d+-[0-9a-f]{8}$")
 class RenderTask:
     """One render: a sequence into ``<out>/<rel_dir>`` with Monte Carlo seed ``seed``."""
 
-    sequence: Any  # simspad.spec.SequenceSpec
+    sequence: Any  # simspad.dataset.spec.SequenceSpec
     render_hash: str
     rel_dir: str
     seed: int
@@ -78,7 +78,7 @@ class RecordingTask:
     seed: int
     stream_key: tuple
     gt_rate_hz: float
-    optics: Any  # simspad.radiometry.Optics
+    optics: Any  # simspad.physics.radiometry.Optics
     metadata: tuple  # ((key, value), ...): root attrs of the recording
 
 
@@ -112,13 +112,13 @@ def _versions() -> dict[str, str]:
 
 
 def _render_seed(dataset_seed: int, sequence_name: str) -> int:
-    from simspad.seeding import child_seed
+    from simspad.physics.seeding import child_seed
 
     return int(child_seed(dataset_seed, sequence_name, "render").generate_state(1)[0])
 
 
 def _scene_name(scene: str) -> str:
-    from simspad.scenes import resolve_scene
+    from simspad.scenes.library import resolve_scene
 
     return resolve_scene(scene).name
 
@@ -129,8 +129,8 @@ def make_plan(spec, created_utc: str) -> Plan:
     Resolving the scenes and hashing the scene and trajectory files happens here, in the calling process, so
     an unknown scene or a missing file fails before any work starts.
     """
-    from simspad.radiometry import Optics
-    from simspad.spec import canonical_json, sequence_hash, spec_hash
+    from simspad.physics.radiometry import Optics
+    from simspad.dataset.spec import canonical_json, sequence_hash, spec_hash
 
     versions = _versions()
     optics = Optics()
@@ -245,7 +245,7 @@ class _Manifest:
     """The manifest being built: entries keyed by path, rewritten atomically on every change."""
 
     def __init__(self, out_dir: Path, spec, plan: Plan, created_utc: str, previous: dict | None):
-        from simspad.spec import spec_hash
+        from simspad.dataset.spec import spec_hash
 
         self.out_dir = out_dir
         old = {e["path"]: e for e in (previous or {}).get("recordings", [])}
@@ -337,9 +337,9 @@ def generate(spec, out_dir=None, executor: str = "local", scheduler: str | None 
     SimSpadError
         Bad spec, a concurrent run on ``out_dir``, or recordings that failed (listed in the manifest).
     """
-    from simspad.spec import DatasetSpec, load_spec
+    from simspad.dataset.spec import DatasetSpec, load_spec
 
-    from simspad.executors import check_executor_options
+    from simspad.dataset.executors import check_executor_options
 
     t_start = time.perf_counter()
     check_executor_options(executor, scheduler, workers)
@@ -392,7 +392,7 @@ def _remove_obsolete(out_dir: Path, manifest: _Manifest, log) -> None:
 def _run(out_dir: Path, plan: Plan, manifest: _Manifest, executor_kind, scheduler, workers, progress, log):
     from tqdm import tqdm
 
-    from simspad.executors import make_executor
+    from simspad.dataset.executors import make_executor
 
     # Which recordings are already there (verified: hash of the spec inputs and sha256 of the bytes)?
     todo, skipped = [], []
@@ -544,7 +544,7 @@ def summary_table(res: GenerateResult) -> str:
 def generate_from_cli(spec_path=None, out_dir=None, executor: str = "local", scheduler: str | None = None,
                       workers: int | None = None) -> Path:
     """``simspad generate``: load the spec (default ``datasets/mini.toml``), run, print the summary table."""
-    from simspad.spec import default_spec_path, load_spec
+    from simspad.dataset.spec import default_spec_path, load_spec
 
     spec = load_spec(spec_path if spec_path is not None else default_spec_path())
     res = generate(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers, progress=True,

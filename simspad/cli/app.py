@@ -89,7 +89,7 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
 def generate(spec, out_dir, executor, scheduler, workers):
     """Generate a dataset from SPEC (default: the embedded datasets/mini.toml)."""
-    from simspad.jobs import generate_from_cli
+    from simspad.dataset.jobs import generate_from_cli
 
     generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers)
 
@@ -140,7 +140,7 @@ def snr(out_path):
 @click.argument("path", type=click.Path(path_type=Path))
 def info(path):
     """Summarise a spec (.toml), trajectory, recording (.h5) or dataset directory."""
-    from simspad.info import describe
+    from simspad.cli.info import describe
 
     click.echo(describe(path))
 
@@ -150,7 +150,7 @@ def info(path):
               help="Render every built-in scene into one tone-mapped PNG.")
 def scenes(contact_sheet):
     """List the built-in scenes and their default trajectories."""
-    from simspad.scenes import scenes_from_cli
+    from simspad.scenes.library import scenes_from_cli
 
     scenes_from_cli(contact_sheet=contact_sheet)
 

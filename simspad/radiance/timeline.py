@@ -5,7 +5,7 @@ directory, or from arrays for in-memory use) through a small LRU cache, so memor
 of keyframes. Between keyframes radiance is linear in time, so :meth:`Timeline.integrate` is exact: the
 trapezoid rule on each linear piece.
 
-Values are luminance ``Y`` (from linear sRGB with :func:`simspad.radiometry.luminance_from_rgb`) times
+Values are luminance ``Y`` (from linear sRGB with :func:`simspad.physics.radiometry.luminance_from_rgb`) times
 :attr:`Timeline.scale`: relative units as rendered, or photons s⁻¹ m⁻² after :meth:`Timeline.photon_flux`.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from simspad.errors import InputError
 from simspad.io.exr import read_exr, read_exr_info
-from simspad.radiometry import Optics, flux_scale, luminance_from_rgb
+from simspad.physics.radiometry import Optics, flux_scale, luminance_from_rgb
 
 TIMELINE_FORMAT = "simspad-timeline"
 TIMELINE_VERSION = 1

@@ -19,10 +19,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from simspad.errors import SimSpadError
+from simspad.io.bundled import REPO_ROOT, SCENES_DIR
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-SCENES_DIR = REPO_ROOT / "scenes"
-_ASSETS_DIR = Path(__file__).resolve().parent / "scene_assets"
+_ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 #: Camera id assumed for a user's XML whose first perspective sensor has no id; the renderer then takes the
 #: scene's first sensor.
 DEFAULT_CAMERA_ID = "camera"
@@ -110,7 +109,7 @@ def scene_dict_or_file(info: SceneInfo) -> dict | Path:
 
     A Mitsuba variant must be set before calling this for a ``scene.py`` scene (``build()`` creates Mitsuba
     objects such as ``mi.Bitmap``). The returned dict is fresh on each call; procedural assets are cached in
-    memory by :mod:`simspad.scene_assets`.
+    memory by :mod:`simspad.scenes.assets`.
     """
     info = resolve_scene(info)
     if info.source is None:
@@ -131,7 +130,7 @@ def scene_dict_or_file(info: SceneInfo) -> dict | Path:
 def content_hash(info: SceneInfo) -> str:
     """SHA-256 (hex) over the scene folder's files in sorted order: relative path and bytes of each.
 
-    Built-in scenes also hash the procedural asset generators (``simspad/scene_assets``), since their textures
+    Built-in scenes also hash the procedural asset generators (``simspad/scenes/assets``), since their textures
     and meshes are made at load time. ``__pycache__`` and hidden files are skipped.
     """
     info = resolve_scene(info)
@@ -162,7 +161,7 @@ def scenes_from_cli(contact_sheet: Path | None = None) -> None:
         objs = f"  [animated: {', '.join(s.objects)}]" if s.objects else ""
         click.echo(f"{s.name:<{width}}  {traj:<{traj_width}}  {s.description}{objs}")
     if contact_sheet is not None:
-        from simspad.scene_assets.contact_sheet import write_contact_sheet
+        from simspad.render.contact_sheet import write_contact_sheet
 
         path = write_contact_sheet(Path(contact_sheet), scenes)
         click.echo(f"wrote {path}")

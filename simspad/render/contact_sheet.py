@@ -49,9 +49,9 @@ def tone_map(rgb: np.ndarray, key: float = 0.18, white_percentile: float = 99.5)
 def render_preview(scene, resolution=TILE_SIZE, spp: int = TILE_SPP, seed: int = 0) -> np.ndarray:
     """Linear RGB ``[H, W, 3]`` of ``scene`` at t = start of its default trajectory (a 1 ms, 2-keyframe render)."""
     from simspad.render.renderer import render_sequence
-    from simspad.scenes import resolve_scene
-    from simspad.timeline import Timeline
-    from simspad.trajectory import load_trajectory
+    from simspad.scenes.library import resolve_scene
+    from simspad.radiance.timeline import Timeline
+    from simspad.motion.trajectory import load_trajectory
 
     info = resolve_scene(scene)
     t0 = load_trajectory(info.default_trajectory).t_start if info.default_trajectory else 0.0

@@ -1,6 +1,6 @@
 """Procedural triangle meshes as numpy arrays: ``(vertices [N, 3] m, faces [F, 3] uint32, uv [N, 2])``.
 
-Pure numpy (no Mitsuba), deterministic; :func:`simspad.scene_assets.build.mesh` turns them into ``mi.Mesh``.
+Pure numpy (no Mitsuba), deterministic; :func:`simspad.scenes.assets.build.mesh` turns them into ``mi.Mesh``.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """``simspad info``: a readable summary of whatever file or folder it is given.
 
-Dispatch on the path: a dataset spec or trajectory file is summarised here (:mod:`simspad.spec`,
-:mod:`simspad.trajectory`); a recording (``.h5``) or a dataset directory (``manifest.json``) by
-:mod:`simspad.jobs_info`.
+Dispatch on the path: a dataset spec or trajectory file is summarised here (:mod:`simspad.dataset.spec`,
+:mod:`simspad.motion.trajectory`); a recording (``.h5``) or a dataset directory (``manifest.json``) by
+:mod:`simspad.cli.describe`.
 """
 
 from __future__ import annotations
@@ -31,30 +31,30 @@ def describe(path) -> str:
         raise SimSpadError("no such file or directory", path=path)
     if path.is_dir():
         if (path / "manifest.json").is_file():
-            from simspad.jobs_info import describe_dataset
+            from simspad.cli.describe import describe_dataset
 
             return describe_dataset(path)
         raise SimSpadError("not a dataset directory (no manifest.json; expected a dataset directory, a spec, "
                            "a trajectory or a recording)", path=path)
     suffix = path.suffix.lower()
     if path.name == "manifest.json":
-        from simspad.jobs_info import describe_dataset
+        from simspad.cli.describe import describe_dataset
 
         return describe_dataset(path.parent)
     if suffix in _RECORDING_SUFFIXES:
-        from simspad.jobs_info import describe_recording
+        from simspad.cli.describe import describe_recording
 
         return describe_recording(path)
     if suffix == ".toml":
         if _is_trajectory_toml(path):
-            from simspad.trajectory import describe_trajectory
+            from simspad.motion.trajectory import describe_trajectory
 
             return describe_trajectory(path)
-        from simspad.spec import describe_spec
+        from simspad.dataset.spec import describe_spec
 
         return describe_spec(path)
     if suffix in _TRAJECTORY_SUFFIXES:
-        from simspad.trajectory import describe_trajectory
+        from simspad.motion.trajectory import describe_trajectory
 
         return describe_trajectory(path)
     raise SimSpadError(f"unknown kind of file {path.suffix or '(no suffix)'!r} (expected a spec .toml, a trajectory "

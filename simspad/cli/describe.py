@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simspad.manifest import read_manifest
+from simspad.io.manifest import read_manifest
 
 _SPAD_SAMPLE_BINS = 1024
 """Binary frames read to estimate the mean detection probability (cheap: the file is not read whole)."""

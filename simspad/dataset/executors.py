@@ -6,7 +6,7 @@ environment (``DRJIT_LIBLLVM_PATH``) before Mitsuba is imported, choose the Mits
 write their output atomically, and never raise: they return a dict with ``ok`` and either results or a one-line
 ``error``, so an exception that does not pickle cannot hang the job.
 
-Executors expose one small interface used by :mod:`simspad.jobs`:
+Executors expose one small interface used by :mod:`simspad.dataset.jobs`:
 ``submit_render(task)``, ``submit_simulation(task)``, ``wait(futures) -> done``, ``result(future)``,
 ``sim_slots(renders_running)`` (how many simulations may run now) and ``close()``.
 """
@@ -103,7 +103,7 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         _apply_environment(env)
-        from simspad.manifest import file_sha256
+        from simspad.io.manifest import file_sha256
         from simspad.sensors.simulate import simulate_recording
 
         out_path = Path(out_dir) / task.rel_path

@@ -40,11 +40,8 @@ from pathlib import Path
 from typing import Any
 
 from simspad.errors import SimSpadError, SpecError
+from simspad.io.bundled import DATASETS_DIR, REPO_ROOT, SCENES_DIR, TRAJECTORIES_DIR
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-DATASETS_DIR = REPO_ROOT / "datasets"
-TRAJECTORIES_DIR = REPO_ROOT / "trajectories"
-SCENES_DIR = REPO_ROOT / "scenes"
 
 KNOWN_METHODS = ("ni", "nedi", "nedi_akf", "adaptive_nedi_akf", "akf_fe", "cf", "edi", "qbp")
 """Method names of docs/internals.md; the method registry, once importable, adds any others."""
@@ -213,7 +210,7 @@ def sequence_hash(seq: SequenceSpec, spec: DatasetSpec | None = None) -> str:
     With ``spec``: additionally the dataset seed, every sensor's resolved parameters and the evaluation rate
     (the ground-truth rate), i.e. what a recording of the sequence depends on apart from its lux level.
     """
-    from simspad.scenes import content_hash, resolve_scene
+    from simspad.scenes.library import content_hash, resolve_scene
 
     d = seq.to_dict()
     d.pop("name")
@@ -483,7 +480,7 @@ def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None
     local = base / scene
     candidate = str(local.resolve()) if local.exists() else scene
     try:
-        from simspad.scenes import resolve_scene
+        from simspad.scenes.library import resolve_scene
     except ImportError:
         # Scene library not importable (partial checkout): accept built-in folders and existing paths.
         if (SCENES_DIR / scene).is_dir() or Path(candidate).exists():
@@ -504,12 +501,12 @@ def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None
 def _check_trajectory(trajectory: str | None, scene: str, start_s: float, duration_s: float, where: str,
                       err: _Errors) -> None:
     """Read the sequence's trajectory (its own or the scene's default) and check it spans the sequence."""
-    from simspad.trajectory import load_trajectory
+    from simspad.motion.trajectory import load_trajectory
 
     field_name = f"{where}.trajectory"
     if trajectory is None:
         try:
-            from simspad.scenes import resolve_scene
+            from simspad.scenes.library import resolve_scene
 
             default = resolve_scene(scene).default_trajectory
         except (ImportError, SimSpadError):
@@ -650,7 +647,7 @@ def _short(path) -> str:
 
 
 def _default_trajectory_text(scene: str) -> str:
-    from simspad.scenes import resolve_scene
+    from simspad.scenes.library import resolve_scene
 
     default = resolve_scene(scene).default_trajectory
     return "scene default (static camera)" if default is None else f"scene default ({_short(default)})"

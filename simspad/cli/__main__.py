@@ -1,0 +1,7 @@
+"""``python -m simspad.cli``: the same as the ``simspad`` command."""
+
+import sys
+
+from simspad.cli.app import main
+
+sys.exit(main())
