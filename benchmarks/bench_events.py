@@ -40,10 +40,9 @@ import numba
 import numpy as np
 
 from simspad.physics.radiometry import flux_scale
+from simspad.radiance.timeline import Timeline
 from simspad.sensors import events
 from simspad.sensors.presets import EventParams
-from simspad.radiance.timeline import Timeline
-
 
 #: SimSPAD's default internal step tolerance: the accuracy its speed is compared at.
 DEFAULT_TOLERANCE = EventParams().substep_tolerance

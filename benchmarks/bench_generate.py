@@ -40,8 +40,8 @@ sys.path.insert(0, str(REPO))
 
 from simspad.dataset.executors import default_workers, job_environment  # noqa: E402
 from simspad.dataset.jobs import generate, make_plan  # noqa: E402
-from simspad.io.manifest import read_manifest  # noqa: E402
 from simspad.dataset.spec import load_spec, spec_from_dict  # noqa: E402
+from simspad.io.manifest import read_manifest  # noqa: E402
 
 GIB = 1024**3
 

@@ -104,8 +104,8 @@ def pan_trajectory(width: int):
     from scipy.integrate import cumulative_trapezoid
     from scipy.spatial.transform import Rotation
 
-    from simspad.render.schedule import focal_length_px
     from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
+    from simspad.render.schedule import focal_length_px
 
     focal = focal_length_px(FOV_DEG, width)
     x_border = 0.5 * width / focal
@@ -176,9 +176,9 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     res = tuple(int(v) for v in args.resolution.split("x"))
 
+    from simspad.radiance.timeline import Timeline
     from simspad.render.renderer import render_sequence, select_variant
     from simspad.render.schedule import SPAD_BIN_S, brute_force_keyframes
-    from simspad.radiance.timeline import Timeline
 
     variant = select_variant()
     work = Path(tempfile.mkdtemp(prefix="bench_render-"))

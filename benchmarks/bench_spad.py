@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad import SpadChunker, chunk_bins, detection_area_m2, pack_bits
-from simspad.radiance.timeline import Timeline
 
 SWISSSPAD2_GBIT_S = 512 * 512 / 10.24e-6 / 1e9  # 25.6
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from simspad.radiance.timeline import write_render_dir
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.simulate import simulate_recording
-from simspad.radiance.timeline import write_render_dir
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from simspad import __version__
+from simspad import __version__, defaults
 from simspad.errors import SimSpadError
 
 _DEBUG = False
@@ -44,11 +44,12 @@ def cli(debug: bool) -> None:
 @click.argument("trajectory", required=False)
 @click.option("--duration", "duration_s", type=float, required=True, help="Sequence duration in seconds.")
 @click.option("--start", "start_s", type=float, default=0.0, show_default=True, help="Start time in seconds.")
-@click.option("--resolution", callback=_parse_resolution, default="128x96", show_default=True, help="WxH pixels.")
-@click.option("--spp", type=int, default=16, show_default=True, help="Samples per pixel.")
-@click.option("--max-flow", "max_flow_px", type=float, default=0.5, show_default=True,
+@click.option("--resolution", callback=_parse_resolution, default="{}x{}".format(*defaults.RESOLUTION_PX), show_default=True,
+              help="WxH pixels.")
+@click.option("--spp", type=int, default=defaults.SPP, show_default=True, help="Samples per pixel.")
+@click.option("--max-flow", "max_flow_px", type=float, default=defaults.MAX_FLOW_PX, show_default=True,
               help="Largest image motion between keyframes (pixels).")
-@click.option("--min-rate", "min_rate_hz", type=float, default=1000.0, show_default=True,
+@click.option("--min-rate", "min_rate_hz", type=float, default=defaults.MIN_KEYFRAME_RATE_HZ, show_default=True,
               help="Lowest keyframe rate (Hz), whatever the motion.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Render seed (frozen Monte Carlo noise).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")

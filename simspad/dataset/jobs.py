@@ -22,7 +22,6 @@ killed run are removed on the next run (the lock guarantees no one else is writi
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 import fcntl
 import os
 import re
@@ -36,8 +35,16 @@ from typing import Any, Callable
 from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.io.atomic import ensure_writable_dir
-from simspad.io.manifest import (FORMAT, VERSION, manifest_path, read_manifest, recording_is_complete, utc_now,
-                              write_manifest)
+from simspad.io.manifest import (
+    FORMAT,
+    VERSION,
+    manifest_path,
+    read_manifest,
+    recording_is_complete,
+    utc_now,
+    write_manifest,
+)
+from simspad.io.provenance import source_date_epoch
 
 LOCK_NAME = ".simspad.lock"
 RENDERS_DIR = "renders"
@@ -129,8 +136,8 @@ def make_plan(spec, created_utc: str) -> Plan:
     Resolving the scenes and hashing the scene and trajectory files happens here, in the calling process, so
     an unknown scene or a missing file fails before any work starts.
     """
-    from simspad.physics.radiometry import Optics
     from simspad.dataset.spec import canonical_json, sequence_hash, spec_hash
+    from simspad.physics.radiometry import Optics
 
     versions = _versions()
     optics = Optics()
@@ -224,12 +231,9 @@ def remove_temporaries(out_dir: Path) -> list[Path]:
 def _created_utc(previous: dict | None, override: str | None) -> str:
     if override:
         return override
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    if epoch:
-        try:
-            return _dt.datetime.fromtimestamp(int(epoch), _dt.timezone.utc).isoformat().replace("+00:00", "Z")
-        except ValueError:
-            raise SimSpadError(f"expected an integer Unix time, got {epoch!r}", field="SOURCE_DATE_EPOCH") from None
+    pinned = source_date_epoch()
+    if pinned:
+        return pinned
     if previous and isinstance(previous.get("created_utc"), str):
         return previous["created_utc"]
     return utc_now()
@@ -337,9 +341,8 @@ def generate(spec, out_dir=None, executor: str = "local", scheduler: str | None 
     SimSpadError
         Bad spec, a concurrent run on ``out_dir``, or recordings that failed (listed in the manifest).
     """
-    from simspad.dataset.spec import DatasetSpec, load_spec
-
     from simspad.dataset.executors import check_executor_options
+    from simspad.dataset.spec import DatasetSpec, load_spec
 
     t_start = time.perf_counter()
     check_executor_options(executor, scheduler, workers)

@@ -39,9 +39,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from simspad import defaults
 from simspad.errors import SimSpadError, SpecError
 from simspad.io.bundled import DATASETS_DIR, REPO_ROOT, SCENES_DIR, TRAJECTORIES_DIR
-
+from simspad.io.hashing import file_sha256
 
 KNOWN_METHODS = ("ni", "nedi", "nedi_akf", "adaptive_nedi_akf", "akf_fe", "cf", "edi", "qbp")
 """Method names of docs/internals.md; the method registry, once importable, adds any others."""
@@ -76,10 +77,10 @@ class SequenceSpec:
     trajectory: str | None
     duration_s: float
     start_s: float = 0.0
-    resolution: tuple[int, int] = (128, 96)
-    spp: int = 16
-    max_flow_px: float = 0.5
-    min_rate_hz: float = 1000.0
+    resolution: tuple[int, int] = defaults.RESOLUTION_PX
+    spp: int = defaults.SPP
+    max_flow_px: float = defaults.MAX_FLOW_PX
+    min_rate_hz: float = defaults.MIN_KEYFRAME_RATE_HZ
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict of the fields."""
@@ -108,7 +109,7 @@ class SensorSpec:
 class EvaluationSpec:
     """Evaluation settings: ground-truth / scoring rate (Hz) and method names (empty: all that apply)."""
 
-    rate_hz: float = 1000.0
+    rate_hz: float = defaults.GT_RATE_HZ
     methods: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
@@ -191,15 +192,6 @@ def spec_hash(obj) -> str:
         d["sequences"] = [{"name": s.name, "content": sequence_hash(s)} for s in obj.sequences]
         obj = d
     return hashlib.sha256(canonical_json(obj).encode("utf-8")).hexdigest()
-
-
-def file_sha256(path) -> str:
-    """SHA-256 (hex) of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def sequence_hash(seq: SequenceSpec, spec: DatasetSpec | None = None) -> str:
@@ -451,19 +443,19 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
     start = _number(err, f"{where}.start_s", t.get("start_s", 0.0), non_negative=True,
                     what="a start time in seconds ≥ 0")
 
-    resolution = t.get("resolution", [128, 96])
+    resolution = t.get("resolution", list(defaults.RESOLUTION_PX))
     if (not isinstance(resolution, list) or len(resolution) != 2
             or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in resolution)):
         err.add(f"{where}.resolution", f"got {resolution!r} (expected two positive integers [W, H])")
         resolution = None
 
-    spp = t.get("spp", 16)
+    spp = t.get("spp", defaults.SPP)
     if not isinstance(spp, int) or isinstance(spp, bool) or spp <= 0:
         err.add(f"{where}.spp", f"got {_type_name(spp)} {spp!r} (expected an integer > 0 samples per pixel)")
         spp = None
-    max_flow = _number(err, f"{where}.max_flow_px", t.get("max_flow_px", 0.5), positive=True,
+    max_flow = _number(err, f"{where}.max_flow_px", t.get("max_flow_px", defaults.MAX_FLOW_PX), positive=True,
                        what="pixels > 0")
-    min_rate = _number(err, f"{where}.min_rate_hz", t.get("min_rate_hz", 1000.0), positive=True,
+    min_rate = _number(err, f"{where}.min_rate_hz", t.get("min_rate_hz", defaults.MIN_KEYFRAME_RATE_HZ), positive=True,
                        what="a rate in Hz > 0")
     if len(err.lines) > n_errors or name is None:
         return name, None
@@ -540,7 +532,12 @@ def _find_trajectory(name: str, base: Path) -> Path | None:
 
 
 def _validate_sensors(raw: dict, err: _Errors) -> dict[str, SensorSpec]:
-    from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
+    from simspad.sensors.presets import (
+        DEFAULT_PRESET,
+        PRESETS,
+        SENSOR_KINDS,
+        sensor_params,
+    )
 
     value = raw.get("sensors")
     if value is None:
@@ -590,7 +587,7 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
     for key in value:
         if key not in _EVAL_KEYS:
             err.add(f"evaluation.{key}", f"unknown key (expected one of {', '.join(_EVAL_KEYS)})")
-    rate = _number(err, "evaluation.rate_hz", value.get("rate_hz", 1000.0), positive=True, what="a rate in Hz > 0")
+    rate = _number(err, "evaluation.rate_hz", value.get("rate_hz", defaults.GT_RATE_HZ), positive=True, what="a rate in Hz > 0")
     methods = value.get("methods", [])
     if isinstance(methods, str):
         methods = [methods]
@@ -607,7 +604,7 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
     for i, m in enumerate(methods):
         if m not in known:
             err.add(f"evaluation.methods[{i}]", f"unknown method {m!r} (expected one of {', '.join(sorted(known))})")
-    return EvaluationSpec(rate_hz=rate if rate is not None else 1000.0, methods=tuple(methods))
+    return EvaluationSpec(rate_hz=rate if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods))
 
 
 # --------------------------------------------------------------------------------------------------------------

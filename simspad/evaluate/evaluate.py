@@ -35,14 +35,21 @@ from pathlib import Path
 
 import numpy as np
 
-from simspad import __version__
+from simspad import __version__, defaults
 from simspad.errors import SimSpadError
 from simspad.evaluate import metrics
-from simspad.io.results_dir import (CROP_PX, check_output_dir, crop, recording_key, save_png, slug,
-                                      write_results_dir)
 from simspad.io.atomic import atomic_path
+from simspad.io.results_dir import (
+    CROP_PX,
+    check_output_dir,
+    crop,
+    recording_key,
+    save_png,
+    slug,
+    write_results_dir,
+)
 
-DEFAULT_RATE_HZ = 1000.0
+DEFAULT_RATE_HZ = defaults.GT_RATE_HZ
 MAX_WORKERS = 2
 
 

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from simspad.errors import SimSpadError
-from simspad.io.results_dir import read_csv, slug
 from simspad.io.atomic import atomic_path, ensure_writable_dir
+from simspad.io.results_dir import read_csv, slug
 
 DAGGER = "†"
 MAX_STRIPS = 15

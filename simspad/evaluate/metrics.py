@@ -30,6 +30,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from simspad.physics.colour import srgb_encode
+
 PSNR_CAP_DB = 100.0
 WHITE_PERCENTILE = 99.0
 LOG_FLOOR_REL = 1e-3
@@ -38,13 +40,6 @@ MIN_STAR_CYCLES = 8
 
 
 # -- display mapping -------------------------------------------------------------------------------------------
-
-def srgb_encode(v: np.ndarray) -> np.ndarray:
-    """sRGB transfer curve (IEC 61966-2-1) of linear values in [0, 1]; float32 out."""
-    v = np.asarray(v, dtype=np.float32)
-    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(np.maximum(v, 0.0031308), 1 / 2.4) - 0.055
-                    ).astype(np.float32)
-
 
 def display_map(img: np.ndarray, white: float) -> np.ndarray:
     """Display-map linear irradiance ``img`` (ph s⁻¹ m⁻²) with white point ``white`` (same units) to [0, 1]."""

@@ -20,11 +20,20 @@ import numpy as np
 from simspad import __version__
 from simspad.errors import InputError
 from simspad.evaluate import metrics
-from simspad.evaluate.evaluate import (RecordingEntry, _gt_white_point, evaluation_indices, fill_entry,
-                                       list_recordings, protocol_metadata, score_frames, write_images,
-                                       DEFAULT_RATE_HZ, _spec_evaluation)
-from simspad.io.results_dir import check_output_dir, write_results_dir
+from simspad.evaluate.evaluate import (
+    DEFAULT_RATE_HZ,
+    RecordingEntry,
+    _gt_white_point,
+    _spec_evaluation,
+    evaluation_indices,
+    fill_entry,
+    list_recordings,
+    protocol_metadata,
+    score_frames,
+    write_images,
+)
 from simspad.io.atomic import atomic_path
+from simspad.io.results_dir import check_output_dir, write_results_dir
 
 FORMAT = "simspad-submission"
 FORMAT_VERSION = 1

@@ -29,6 +29,8 @@ from typing import Any
 
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
+from simspad.io.hashing import file_sha256  # noqa: F401  (re-exported: manifest readers check files)
+from simspad.io.provenance import utc_now  # noqa: F401  (re-exported)
 
 MANIFEST_NAME = "manifest.json"
 FORMAT = "simspad-dataset"
@@ -37,23 +39,9 @@ STATUSES = ("complete", "pending", "failed")
 _HASH_CHUNK_BYTES = 8 << 20
 
 
-def utc_now() -> str:
-    """The current UTC time as ISO 8601 with a ``Z`` suffix, to the second."""
-    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-
-
 def manifest_path(dataset_dir: str | Path) -> Path:
     """``<dataset_dir>/manifest.json``."""
     return Path(dataset_dir) / MANIFEST_NAME
-
-
-def file_sha256(path: str | Path) -> str:
-    """Hex sha256 of a file's bytes, read in 8 MiB chunks (memory does not grow with file size)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(_HASH_CHUNK_BYTES):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def content_sha256(path: str | Path, *, rows_per_read: int = 4096) -> str:

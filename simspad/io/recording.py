@@ -24,7 +24,8 @@ from simspad.io.atomic import ensure_writable_dir, temporary_sibling
 
 FORMAT = "simspad-recording"
 FORMAT_VERSION = 1
-SENSOR_GROUPS = ("spad", "frames", "events")
+#: The sensor kinds, in the order their groups are listed; every layer takes the names from here.
+SENSOR_KINDS = ("spad", "frames", "events")
 _LIBVER = ("v110", "v110")
 
 
@@ -205,7 +206,7 @@ class Recording:
 
     @property
     def sensors(self) -> tuple[str, ...]:
-        return tuple(k for k in SENSOR_GROUPS if k in self.h5)
+        return tuple(k for k in SENSOR_KINDS if k in self.h5)
 
     @property
     def width(self) -> int:

@@ -18,6 +18,13 @@ name                   label                       what it reads / does (default
 All parameters come from the recording's attrs (DESIGN §5); none is tuned per scene.
 """
 
-from simspad.methods.registry import Bandwidth, Method, Reconstruction, available_methods, get_method, register
+from simspad.methods.registry import (
+    Bandwidth,
+    Method,
+    Reconstruction,
+    available_methods,
+    get_method,
+    register,
+)
 
 __all__ = ["Bandwidth", "Method", "Reconstruction", "available_methods", "get_method", "register"]

@@ -22,8 +22,6 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-SENSOR_KINDS = ("spad", "frames", "events")
-
 
 @dataclass(frozen=True)
 class Bandwidth:

@@ -16,9 +16,10 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from simspad.io.atomic import atomic_path
+from simspad.physics.colour import srgb_encode
+from simspad.physics.radiometry import luminance_from_rgb
 
 #: Rec. 709 luminance weights of linear sRGB.
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
 TILE_SIZE = (240, 180)  # width, height in pixels
 TILE_SPP = 64
 LABEL_HEIGHT_PX = 18
@@ -37,21 +38,21 @@ def tone_map(rgb: np.ndarray, key: float = 0.18, white_percentile: float = 99.5)
         Luminance percentile that maps to display white (at least the exposure-scaled value 1).
     """
     rgb = np.maximum(np.nan_to_num(np.asarray(rgb, dtype=np.float64)), 0.0)
-    lum = rgb @ _LUMA
+    lum = luminance_from_rgb(rgb).astype(np.float64)
     log_avg = float(np.exp(np.mean(np.log(lum + 1e-6))))
     x = rgb * (key / max(log_avg, 1e-12))
     white = max(float(np.percentile(lum, white_percentile)) * key / max(log_avg, 1e-12), 1.0)
     x = x * (1.0 + x / white**2) / (1.0 + x)
     x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    return srgb_encode(x).astype(np.float64)
 
 
 def render_preview(scene, resolution=TILE_SIZE, spp: int = TILE_SPP, seed: int = 0) -> np.ndarray:
     """Linear RGB ``[H, W, 3]`` of ``scene`` at t = start of its default trajectory (a 1 ms, 2-keyframe render)."""
+    from simspad.motion.trajectory import load_trajectory
+    from simspad.radiance.timeline import Timeline
     from simspad.render.renderer import render_sequence
     from simspad.scenes.library import resolve_scene
-    from simspad.radiance.timeline import Timeline
-    from simspad.motion.trajectory import load_trajectory
 
     info = resolve_scene(scene)
     t0 = load_trajectory(info.default_trajectory).t_start if info.default_trajectory else 0.0

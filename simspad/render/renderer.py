@@ -24,11 +24,18 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from simspad import defaults
 from simspad.errors import SimSpadError
-from simspad.render.mitsuba_env import select_variant
-from simspad.render.schedule import (SPAD_BIN_S, brute_force_keyframes, camera_flow_bound, focal_length_px,
-                                     keyframe_schedule, object_flow_bound)
 from simspad.radiance.timeline import TIMELINE_FILE, write_timeline_json
+from simspad.render.mitsuba_env import select_variant
+from simspad.render.schedule import (
+    SPAD_BIN_S,
+    brute_force_keyframes,
+    camera_flow_bound,
+    focal_length_px,
+    keyframe_schedule,
+    object_flow_bound,
+)
 
 __all__ = ["RenderSummary", "render_sequence", "select_variant"]
 
@@ -421,8 +428,9 @@ def _frame_key(base: dict, t: float) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float = 0.0, resolution=(128, 96),
-                    spp: int = 16, max_flow_px: float = 0.5, min_rate_hz: float = 1000.0, seed: int = 0,
+def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float = 0.0, resolution=defaults.RESOLUTION_PX,
+                    spp: int = defaults.SPP, max_flow_px: float = defaults.MAX_FLOW_PX,
+                    min_rate_hz: float = defaults.MIN_KEYFRAME_RATE_HZ, seed: int = defaults.SEED,
                     out_dir, progress: bool = True, variant: str | None = None) -> RenderSummary:
     """Render radiance keyframes of ``scene`` along ``trajectory`` into a render directory (DESIGN §5).
 

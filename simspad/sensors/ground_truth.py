@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from simspad import defaults
+
 #: Ground-truth frames written per HDF5 chunk (and held in memory at once).
 GT_CHUNK_FRAMES = 16
 
@@ -30,7 +32,7 @@ def pose_indices(times_s: np.ndarray, t0: float, t1: float) -> slice:
     return slice(i0, i1)
 
 
-def write_ground_truth(writer, flux_tl, t0: float, t1: float, rate_hz: float = 1000.0) -> np.ndarray:
+def write_ground_truth(writer, flux_tl, t0: float, t1: float, rate_hz: float = defaults.GT_RATE_HZ) -> np.ndarray:
     """Write ``/gt/t``, ``/gt/flux``, ``/gt/depth`` (if any) and ``/poses`` (if any), streaming the frames.
 
     Parameters

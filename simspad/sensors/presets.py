@@ -14,6 +14,8 @@ import typing
 from dataclasses import dataclass, field
 from typing import Literal, Union
 
+from simspad.io.recording import SENSOR_KINDS
+
 Auto = Literal["auto"]
 
 
@@ -119,7 +121,6 @@ class EventParams:
     fraction of the pixel's smaller threshold of its exact path (sets crossing-time accuracy)."""
 
 
-SENSOR_KINDS: dict[str, type] = {"spad": SpadParams, "frames": FrameParams, "events": EventParams}
 
 PRESETS: dict[str, dict[str, object]] = {
     "spad": {"swissspad2": SpadParams()},

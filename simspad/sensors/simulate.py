@@ -9,7 +9,6 @@ requested sensor on ``[start_s, start_s + duration_s]`` with its own random stre
 
 from __future__ import annotations
 
-import datetime
 import json
 import math
 import os
@@ -18,14 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from simspad import __version__
+from simspad import __version__, defaults
 from simspad.errors import SimSpadError
+from simspad.io.provenance import created_utc
 from simspad.io.recording import RecordingWriter
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_rng
+from simspad.radiance.timeline import Timeline
 from simspad.sensors.ground_truth import write_ground_truth
 from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs, sensor_params
-from simspad.radiance.timeline import Timeline
 
 #: Instants this close beyond the render's last keyframe are accepted (round-off of start + duration).
 _TIME_TOLERANCE_S = 1e-9
@@ -33,7 +33,7 @@ _TIME_TOLERANCE_S = 1e-9
 
 def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start_s: float | None = None,
                        duration_s: float | None = None, seed: int | np.random.SeedSequence = 0,
-                       stream_key: tuple = (), gt_rate_hz: float = 1000.0, optics: Optics | None = None,
+                       stream_key: tuple = (), gt_rate_hz: float = defaults.GT_RATE_HZ, optics: Optics | None = None,
                        metadata: dict | None = None, progress: bool = False) -> Path:
     """Simulate ``sensors`` on a render directory at ``lux`` and write the recording ``out_path``.
 
@@ -170,7 +170,7 @@ def _root_attrs(tl: Timeline, render_dir, *, lux, sensors, t0, t1, seed, stream_
         "flux_scale": float(flux_scale),
         "optics": optics.to_attrs(),
         "spec": spec,
-        "created_utc": _created_utc(),
+        "created_utc": created_utc(),
     }
     attrs.update(meta)
     return attrs
@@ -181,14 +181,6 @@ def _seed_value(seed):
         return str(seed.entropy) if seed.spawn_key == () else f"{seed.entropy}/{list(seed.spawn_key)}"
     seed = int(seed)
     return seed if -(2**63) <= seed < 2**63 else str(seed)
-
-
-def _created_utc() -> str:
-    """Now, or ``SOURCE_DATE_EPOCH`` when set (reproducible-builds convention: byte-identical reruns)."""
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    when = (datetime.datetime.fromtimestamp(int(epoch), datetime.timezone.utc) if epoch and epoch.isdigit()
-            else datetime.datetime.now(datetime.timezone.utc))
-    return when.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 # ---------------------------------------------------------------------------------------------------- CLI

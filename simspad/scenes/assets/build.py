@@ -6,9 +6,8 @@ renderer picks it). Transforms are composed in numpy (float64) and converted onc
 
 from __future__ import annotations
 
-import numpy as np
-
 import mitsuba as mi
+import numpy as np
 
 Vec = tuple[float, float, float]
 

@@ -12,17 +12,13 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from scipy import ndimage
 
+from simspad.physics.colour import srgb_decode as srgb_to_linear
+
 
 def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a, dtype=np.float32)
     a.setflags(write=False)
     return a
-
-
-def srgb_to_linear(c) -> np.ndarray:
-    """sRGB-encoded colour in [0, 1] → linear, so authored colours look as named."""
-    c = np.asarray(c, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 def value_noise(shape: tuple[int, int], scale_px: float, seed: int) -> np.ndarray:

@@ -5,12 +5,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from simspad.analysis import emva
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
-from simspad.analysis import emva
+from simspad.radiance.timeline import Timeline
 from simspad.sensors import frame
 from simspad.sensors.presets import FrameParams, sensor_params
-from simspad.radiance.timeline import Timeline
 
 SHAPE = (96, 96)
 

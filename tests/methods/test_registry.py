@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from methods_synth import SPAD_ATTRS, write_recording
 from simspad.errors import InputError, SimSpadError
 from simspad.io.recording import open_recording
 from simspad.methods import available_methods, get_method
+from tests.helpers.synthetic_recordings import SPAD_ATTRS, write_recording
 
 NAMES = ["nedi_akf", "adaptive_nedi_akf", "akf_fe", "cf", "edi", "ni", "nedi", "qbp"]
 SHAPE = (16, 48)

@@ -15,11 +15,24 @@ import pytest
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
 from simspad.physics.radiometry import flux_scale
-from simspad.sensors.presets import SpadParams
-from simspad.sensors.spad import (SpadChunker, auto_gate, dcr_map, detection_area_m2, n_bins, pack_bits, resolve_gate,
-                                  simulate_spad, unpack_bits)
-from simspad.physics.spad_statistics import detection_probability, estimate_flux, log_flux_variance
+from simspad.physics.spad_statistics import (
+    detection_probability,
+    estimate_flux,
+    log_flux_variance,
+)
 from simspad.radiance.timeline import Timeline
+from simspad.sensors.presets import SpadParams
+from simspad.sensors.spad import (
+    SpadChunker,
+    auto_gate,
+    dcr_map,
+    detection_area_m2,
+    n_bins,
+    pack_bits,
+    resolve_gate,
+    simulate_spad,
+    unpack_bits,
+)
 
 H, W = 48, 64
 BIN_S = 10.24e-6

@@ -13,9 +13,9 @@ import h5py
 import numpy as np
 
 from simspad.io.recording import RecordingWriter
+from simspad.physics.spad_statistics import detection_probability
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.spad import spad_attrs
-from simspad.physics.spad_statistics import detection_probability
 
 H, W = 24, 32
 GT_RATE_HZ = 2000.0

@@ -10,9 +10,9 @@ from scipy import stats
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
 from simspad.physics.radiometry import flux_scale
+from simspad.radiance.timeline import Timeline
 from simspad.sensors import events
 from simspad.sensors.presets import EventParams
-from simspad.radiance.timeline import Timeline
 
 QUIET = dict(leak_rate_hz=0.0, shot_noise_rate_hz_at_1lux=0.0, hot_pixel_fraction=0.0, latency_s=0.0, jitter_s=0.0)
 #: Photocurrent per unit photon irradiance of the preset pixel (e⁻ s⁻¹ per photon s⁻¹ m⁻²).

@@ -14,9 +14,9 @@ from simspad.cli import main
 from simspad.errors import SimSpadError
 from simspad.io.recording import open_recording
 from simspad.physics.radiometry import Optics, flux_scale
+from simspad.radiance.timeline import Timeline, write_render_dir
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.simulate import parse_overrides, parse_value, simulate_recording
-from simspad.radiance.timeline import Timeline, write_render_dir
 
 H, W = 12, 20
 TIMES = np.array([0.0, 0.0013, 0.0029, 0.004])

@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from methods_synth import FRAME_ATTRS, write_recording
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
 from simspad.methods.edi import edi_deblur
 from simspad.methods.events_util import EventBatch
+from tests.helpers.synthetic_recordings import FRAME_ATTRS, write_recording
 
 
 def test_edi_inverts_the_blur_integral_exactly():

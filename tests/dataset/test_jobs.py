@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from simspad.errors import InputError, SimSpadError
 from simspad.dataset.jobs import DatasetLock, generate, recording_rel_path
-from simspad.io.manifest import content_sha256, file_sha256, read_manifest
 from simspad.dataset.spec import load_spec
+from simspad.errors import InputError, SimSpadError
+from simspad.io.manifest import content_sha256, file_sha256, read_manifest
 
 CREATED = "2025-01-01T00:00:00Z"
 SCENE = "siemens-star"

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from methods_synth import SPAD_ATTRS, spad_q, write_recording
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
 from simspad.methods.spad_response import log_flux_variance
+from tests.helpers.synthetic_recordings import SPAD_ATTRS, spad_q, write_recording
 
 
 @pytest.mark.parametrize("x", [0.1, 1.5])

@@ -9,10 +9,10 @@ import h5py
 import numpy as np
 import pytest
 
-from evaluate_helpers import write_dataset, write_submission
 from simspad.cli import main
 from simspad.evaluate import metrics
 from simspad.io.results_dir import read_csv
+from tests.helpers.evaluation_data import write_dataset, write_submission
 
 EVIL = "<script>alert(1)</script>"
 

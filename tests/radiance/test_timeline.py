@@ -8,8 +8,8 @@ import OpenEXR
 import pytest
 from scipy.integrate import quad_vec
 
-from simspad.physics import radiometry as rad
 from simspad.errors import InputError
+from simspad.physics import radiometry as rad
 from simspad.radiance.timeline import Timeline, write_render_dir
 
 H, W = 6, 8

@@ -11,8 +11,6 @@ from pathlib import Path
 import pytest
 
 from simspad.cli import main
-from simspad.errors import SpecError
-from simspad.sensors.presets import EventParams, FrameParams, SpadParams
 from simspad.dataset.spec import (
     DatasetSpec,
     EvaluationSpec,
@@ -21,6 +19,8 @@ from simspad.dataset.spec import (
     sequence_hash,
     spec_hash,
 )
+from simspad.errors import SpecError
+from simspad.sensors.presets import EventParams, FrameParams, SpadParams
 
 SCENE_XML = """<scene version="3.0.0">
   <sensor type="perspective" id="cam"><float name="fov" value="40"/></sensor>
@@ -98,7 +98,7 @@ def test_good_spec_loads_into_typed_objects(workdir):
     assert Path(first.trajectory) == workdir / "specs" / "dolly.csv"
     assert first.resolution == (32, 24) and first.spp == 4 and first.duration_s == 0.02 and first.start_s == 0.0
     assert first.max_flow_px == 0.5 and first.min_rate_hz == 1000.0
-    assert Path(second.trajectory) == Path(__file__).resolve().parents[1] / "trajectories" / "example_pan.csv"
+    assert Path(second.trajectory) == Path(__file__).resolve().parents[2] / "trajectories" / "example_pan.csv"
     assert second.max_flow_px == 0.25 and second.start_s == 0.1
     assert set(spec.sensors) == {"spad", "frames"}
     spad = spec.sensors["spad"]

@@ -10,13 +10,19 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from simspad.physics import radiometry as rad
 from simspad.errors import SimSpadError
 from simspad.io.exr import write_exr
+from simspad.motion.trajectory import (
+    Trajectory,
+    TrajectorySet,
+    linear_pan,
+    look_at,
+    static_pose,
+)
+from simspad.physics import radiometry as rad
+from simspad.radiance.timeline import Timeline
 from simspad.render import schedule as sch
 from simspad.render.renderer import _CompileCounter, render_sequence, select_variant
-from simspad.radiance.timeline import Timeline
-from simspad.motion.trajectory import Trajectory, TrajectorySet, linear_pan, look_at, static_pose
 
 W, H = 48, 32
 FOV_DEG = 40.0

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from methods_synth import ideal_events
 from simspad.methods.cf import cf_decay, cf_events
+from tests.helpers.synthetic_recordings import ideal_events
 
 
 def _high_pass(signal, t, alpha):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from methods_synth import write_recording
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
+from tests.helpers.synthetic_recordings import write_recording
 
 SHAPE = (16, 64)
 

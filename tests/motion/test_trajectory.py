@@ -24,7 +24,7 @@ from simspad.motion.trajectory import (
     static_pose,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _random_trajectory(seed: int, n: int = 7, t0: float = 0.0) -> Trajectory:

@@ -12,10 +12,15 @@ from PIL import Image
 from scipy.ndimage import gaussian_filter
 
 from simspad.errors import SimSpadError
-from simspad.render.renderer import render_sequence
-from simspad.scenes.library import builtin_scene_names, list_scenes, resolve_scene, scenes_from_cli
-from simspad.radiance.timeline import Timeline
 from simspad.motion.trajectory import load_trajectory
+from simspad.radiance.timeline import Timeline
+from simspad.render.renderer import render_sequence
+from simspad.scenes.library import (
+    builtin_scene_names,
+    list_scenes,
+    resolve_scene,
+    scenes_from_cli,
+)
 
 REQUIRED = {"office", "piano", "plant", "siemens-star", "fan"}
 SIZE = (48, 36)
@@ -161,7 +166,11 @@ def test_simspad_scenes_lists_every_scene_with_its_trajectory(capsys):
 
 
 def test_contact_sheet_tiles_tone_mapped_labelled_renders(tmp_path):
-    from simspad.render.contact_sheet import LABEL_HEIGHT_PX, tone_map, write_contact_sheet
+    from simspad.render.contact_sheet import (
+        LABEL_HEIGHT_PX,
+        tone_map,
+        write_contact_sheet,
+    )
 
     out = write_contact_sheet(tmp_path / "sheet.png", ["fan", "office"], columns=2, resolution=(40, 30), spp=2)
     sheet = np.asarray(Image.open(out).convert("RGB"), dtype=np.float64)

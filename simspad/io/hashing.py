@@ -1,0 +1,17 @@
+"""Content hashes: of a file's bytes and of JSON-able values in one canonical form."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+_BLOCK_BYTES = 1 << 20
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's bytes, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(_BLOCK_BYTES), b""):
+            h.update(block)
+    return h.hexdigest()
