@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from simspad.radiance.timeline import write_render_dir
 from simspad.sensors.presets import sensor_params
@@ -14,7 +15,8 @@ from simspad.sensors.simulate import simulate_recording
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def test_inspect_recording_runs_and_the_spad_estimate_matches_its_predicted_spread(tmp_path):
+@pytest.mark.slow
+def test_inspect_recording_runs_and_the_spad_estimate_matches_its_predicted_spread(tmp_path, child_env):
     rng = np.random.default_rng(3)
     base = 0.2 + rng.random((24, 32))
     times = np.linspace(0.0, 0.02, 5)
@@ -25,7 +27,7 @@ def test_inspect_recording_runs_and_the_spad_estimate_matches_its_predicted_spre
     rec = simulate_recording(render, tmp_path / "rec.h5", lux=10.0, sensors=sensors, seed=5)
     out = tmp_path / "fig.png"
     res = subprocess.run([sys.executable, str(EXAMPLES / "inspect_recording.py"), str(rec), "--out", str(out)],
-                         capture_output=True, text=True, timeout=120)
+                         capture_output=True, text=True, timeout=120, env=child_env)
     assert res.returncode == 0, res.stderr
     assert out.stat().st_size > 10_000
     m = re.search(r"log error mean ([-+\d.]+), rms ([\d.]+) vs predicted ([\d.]+)", res.stdout)

@@ -2,20 +2,13 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 from simspad.cli import main
 
 SUBCOMMANDS = ("render", "simulate", "generate", "evaluate", "leaderboard", "score", "snr", "info", "scenes")
 
 
-def _run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "simspad.cli", *args], capture_output=True, text=True, timeout=120)
-
-
-def test_help_lists_subcommands():
-    proc = _run("--help")
+def test_help_lists_subcommands(simspad_cli):
+    proc = simspad_cli.run("--help")
     assert proc.returncode == 0
     commands = proc.stdout.split("Commands:")[1]
     for name in SUBCOMMANDS:
@@ -47,14 +40,14 @@ def test_info_on_unknown_kind_of_file(tmp_path, capsys):
     assert "no manifest.json" in capsys.readouterr().err
 
 
-def test_bad_input_has_no_traceback_unless_debug(tmp_path):
+def test_bad_input_has_no_traceback_unless_debug(tmp_path, simspad_cli):
     bad = tmp_path / "t.csv"
     bad.write_text("t,tx,ty,tz,qx,qy,qz,qw\n1,0,0,0,0,0,0,1\n0,0,0,0,0,0,0,1\n")
-    plain = _run("info", str(bad))
+    plain = simspad_cli.run("info", bad)
     assert plain.returncode == 2
     assert plain.stderr.count("\n") == 1 and "Traceback" not in plain.stderr
     assert f"{bad}: line 3: " in plain.stderr
-    debug = _run("--debug", "info", str(bad))
+    debug = simspad_cli.run("--debug", "info", bad)
     assert debug.returncode != 0 and "Traceback" in debug.stderr and "InputError" in debug.stderr
 
 

@@ -7,11 +7,9 @@ process pool and a real Dask LocalCluster. The spec is tiny (32×24 px, 8 ms, 2 
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -24,6 +22,8 @@ from simspad.io.manifest import content_sha256, file_sha256, read_manifest
 
 CREATED = "2025-01-01T00:00:00Z"
 SCENE = "siemens-star"
+
+pytestmark = pytest.mark.slow  # every test here generates (or re-generates) a dataset
 
 
 def _write_spec(path: Path, *, lux=(1, 100), spp_b=2, duration_s=0.008, seed=7) -> Path:
@@ -150,13 +150,12 @@ def test_dask_is_identical_to_local(tiny):
         generate(load_spec(spec_path), root / "bad", executor="local", scheduler="tcp://127.0.0.1:1", progress=False)
 
 
-def test_concurrent_run_is_refused(tiny):
+def test_concurrent_run_is_refused(tiny, simspad_cli):
     root, spec_path, out, _ = tiny
     with DatasetLock(out):
         with pytest.raises(SimSpadError, match="already writing this dataset"):
             generate(load_spec(spec_path), out, progress=False)
-        proc = subprocess.run([sys.executable, "-m", "simspad.cli", "generate", str(spec_path), "--out", str(out)],
-                              capture_output=True, text=True, timeout=120)
+        proc = simspad_cli.run("generate", spec_path, "--out", out)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "already writing this dataset" in lines[0] and "Traceback" not in proc.stderr
@@ -190,15 +189,15 @@ def _children(pid: int) -> list[int]:
         return []
 
 
-def test_resume_after_kill_9(tiny):
+def test_resume_after_kill_9(tiny, simspad_cli):
     root, _, out, _ = tiny
     spec_path = _write_spec(root / "resume.toml", lux=(1, 10, 100, 1000))
     target = root / "resume"
     target.mkdir()
     shutil.copytree(out / "renders", target / "renders")  # same render hashes: the kill lands in simulations
-    proc = subprocess.Popen([sys.executable, "-m", "simspad.cli", "generate", str(spec_path), "--out", str(target),
-                             "--workers", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            env={**os.environ, "SOURCE_DATE_EPOCH": "1735689600"})
+    proc = subprocess.Popen(simspad_cli.command("generate", spec_path, "--out", target, "--workers", 1),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            env={**simspad_cli.env, "SOURCE_DATE_EPOCH": "1735689600"})
     complete = []
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and proc.poll() is None:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import shutil
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -234,10 +232,9 @@ def test_missing_spec_file(tmp_path, capsys):
     assert err.count("\n") == 1 and "none.toml" in err
 
 
-def test_bad_spec_via_console_script(workdir):
+def test_bad_spec_via_console_script(workdir, simspad_cli):
     path = _write(workdir, BAD["lux_not_positive"][0])
-    proc = subprocess.run([sys.executable, "-m", "simspad.cli", "info", str(path)], capture_output=True, text=True,
-                          timeout=120)
+    proc = simspad_cli.run("info", path)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()

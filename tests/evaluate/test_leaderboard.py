@@ -12,15 +12,17 @@ import pytest
 from simspad.cli import main
 from simspad.evaluate import metrics
 from simspad.io.results_dir import read_csv
-from tests.helpers.evaluation_data import write_dataset, write_submission
+from tests.helpers.evaluation_data import write_submission
 
 EVIL = "<script>alert(1)</script>"
 
+pytestmark = pytest.mark.slow  # every test here needs the evaluated dataset (NI and a scored submission)
+
 
 @pytest.fixture(scope="module")
-def evaluated(tmp_path_factory):
+def evaluated(tmp_path_factory, evaluation_dataset):
     root = tmp_path_factory.mktemp("lb")
-    ds = write_dataset(root / "data")
+    ds = evaluation_dataset
     assert main(["evaluate", str(ds), "--methods", "ni", "--out", str(root / "res_ni")]) == 0
     sub = write_submission(root / "evil.h5", ds, method=EVIL, transform=lambda f: 3.0 * np.roll(f, 1, axis=2) ** 0.8,
                            attrs={"absolute_scale": False, "sensors": "E", "label": EVIL + " (E)"})

@@ -1,8 +1,5 @@
 """``simspad score``: a valid submission is scored by the protocol; every malformed kind is refused clearly."""
 
-import subprocess
-import sys
-
 import h5py
 import numpy as np
 import pytest
@@ -10,12 +7,12 @@ import pytest
 from simspad.cli import main
 from simspad.evaluate import metrics
 from simspad.io.results_dir import read_csv
-from tests.helpers.evaluation_data import gt_of, write_dataset, write_submission
+from tests.helpers.evaluation_data import gt_of, write_submission
 
 
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    return write_dataset(tmp_path_factory.mktemp("ds") / "data")
+@pytest.fixture
+def dataset(evaluation_dataset):
+    return evaluation_dataset
 
 
 def test_valid_submission_scores_like_the_protocol(dataset, tmp_path, capsys):
@@ -107,8 +104,7 @@ def test_not_hdf5_missing_file_and_root_dataset(dataset, tmp_path, capsys):
         assert needle in err and "Traceback" not in err
 
 
-def test_console_script_exit_status(dataset, tmp_path):
+def test_console_script_exit_status(dataset, tmp_path, simspad_cli):
     sub = _bad(dataset, tmp_path, attrs={"format": "nope"})
-    proc = subprocess.run([sys.executable, "-m", "simspad.cli", "score", str(sub), "--dataset", str(dataset)],
-                          capture_output=True, text=True, timeout=120)
+    proc = simspad_cli.run("score", sub, "--dataset", dataset)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and "/.format" in proc.stderr

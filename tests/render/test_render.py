@@ -228,6 +228,7 @@ def test_schedule_respects_max_flow_on_a_rendered_pan(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------ objects
+@pytest.mark.slow
 def test_object_trajectory_moves_the_mesh(tmp_path):
     cube = ('<shape type="cube" id="box"><transform name="to_world"><scale value="0.15"/></transform>'
             '<bsdf type="diffuse"><rgb name="reflectance" value="0.0"/></bsdf></shape>')
@@ -291,6 +292,7 @@ def test_timeline_reads_mitsuba_written_exr(tmp_path):
     np.testing.assert_allclose(tl.sample(0.3), rad.luminance_from_rgb(rgb), rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_scene_loads_list_emitters_in_canonical_order():
     # Mitsuba 3.9 permutes emitters between loads; emitter sampling picks by index, so without a canonical order
     # the same render seed gives different noise in different processes (office has three emitters).

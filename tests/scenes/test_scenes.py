@@ -51,6 +51,7 @@ def test_builtin_scenes_exist_with_default_trajectories_covering_a_sequence():
         assert set(ts.objects) <= set(info.objects), info.name  # every animated body is a declared object
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(REQUIRED))
 def test_scene_renders_finite_nonnegative_radiance_with_contrast(first_frames, name):
     rgb = first_frames[name]
@@ -64,6 +65,7 @@ def test_scene_renders_finite_nonnegative_radiance_with_contrast(first_frames, n
     assert np.mean(detail > 0.05) > 0.15, name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["office", "plant"])
 def test_hdr_scenes_reach_1e3_between_brightest_and_darkest_regions(first_frames, name):
     # Luminance smoothed over σ = 1 px (regions of ~3×3 px, so MC noise does not count as contrast); the 99th

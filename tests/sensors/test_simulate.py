@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -160,17 +158,15 @@ def test_cli_bad_input_one_line_exit_2_no_file(render_dir, tmp_path, capsys, cas
     assert not out_dir.exists() or not any(out_dir.iterdir())
 
 
-def test_cli_process_writes_and_fails_cleanly(render_dir, tmp_path):
+@pytest.mark.slow
+def test_cli_process_writes_and_fails_cleanly(render_dir, tmp_path, simspad_cli):
     out = tmp_path / "ok.h5"
-    ok = subprocess.run([sys.executable, "-m", "simspad.cli", "simulate", str(render_dir), "--lux", "2",
-                         "--sensors", "spad", "--set", "spad.gate_s=2e-6", "--out", str(out)],
-                        capture_output=True, text=True, timeout=300)
+    ok = simspad_cli.run("simulate", render_dir, "--lux", "2", "--sensors", "spad", "--set", "spad.gate_s=2e-6",
+                         "--out", out)
     assert ok.returncode == 0, ok.stderr
     with open_recording(out) as rec:
         assert rec.spad_attrs["gate_s"] == 2e-6
     _break("nan", render_dir)
-    bad = subprocess.run([sys.executable, "-m", "simspad.cli", "simulate", str(render_dir), "--lux", "2",
-                          "--sensors", "spad", "--out", str(tmp_path / "bad.h5")],
-                         capture_output=True, text=True, timeout=300)
+    bad = simspad_cli.run("simulate", render_dir, "--lux", "2", "--sensors", "spad", "--out", tmp_path / "bad.h5")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "NaN" in bad.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.h5", "render"]
