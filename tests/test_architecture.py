@@ -42,8 +42,9 @@ def test_import_contract_is_kept(contract, tmp_path):
                            "--no-logo", "--cache-dir", str(tmp_path / "cache")],
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     report = (proc.stdout + proc.stderr).strip()
-    assert "Contracts: 1 kept, 0 broken." in report and proc.returncode == 0, (
-        f"import-linter contract {contract!r} is broken (exit {proc.returncode}):\n\n{report}")
+    if proc.returncode != 0 or "Contracts: 1 kept, 0 broken." not in report:
+        pytest.fail(f"import-linter contract {contract!r} is broken (exit {proc.returncode}):\n\n{report}",
+                    pytrace=False)
 
 
 def _comments_by_line(source: str) -> dict[int, str]:
@@ -87,10 +88,11 @@ def undeclared_deferred_imports(package: Path = PACKAGE) -> list[str]:
 
 def test_function_level_imports_say_why_they_are_deferred():
     problems = undeclared_deferred_imports()
-    assert not problems, (
-        f"{len(problems)} import(s) inside function bodies without a '{DEFERRED_TAG} <why>' comment on their line. "
-        "Move each to the top of its module, or, if it defers a heavy optional dependency (mitsuba, matplotlib, "
-        "dask…), say so in that comment:\n  " + "\n  ".join(problems))
+    if problems:
+        pytest.fail(f"{len(problems)} import(s) inside function bodies without a '{DEFERRED_TAG} <why>' comment on "
+                    "their line. Move each to the top of its module or, if it defers a heavy optional dependency "
+                    "(mitsuba, matplotlib, dask…), say so in that comment:\n  " + "\n  ".join(problems),
+                    pytrace=False)
 
 
 def test_the_deferred_import_check_sees_what_it_should():

@@ -92,6 +92,7 @@ def _disk_mask(render_dir, center_m, radius_m):
     return np.hypot(u - u0, v - v0), focal * radius_m / c[2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, center_m, radius_m, half_period_s", [
     ("fan", (0.0, 0.62, 0.0), 0.17, 0.5 * 60.0 / 600.0 / 5),     # 5 blades at 600 rpm: half a blade period
     ("siemens-star", (0.0, 0.0, 0.0), 0.25, 0.5 * 60.0 / 60.0 / 36),  # 36 cycles at 60 rpm: half a cycle
@@ -167,6 +168,7 @@ def test_simspad_scenes_lists_every_scene_with_its_trajectory(capsys):
     assert any("[animated: blades]" in ln for ln in lines)
 
 
+@pytest.mark.slow
 def test_contact_sheet_tiles_tone_mapped_labelled_renders(tmp_path):
     from simspad.render.contact_sheet import (
         LABEL_HEIGHT_PX,
