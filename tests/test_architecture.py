@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import ast
 import io
-import os
 import subprocess
 import sys
 import tokenize
@@ -33,14 +32,13 @@ def _contract_ids() -> list[str]:
 
 
 @pytest.mark.parametrize("contract", _contract_ids())
-def test_import_contract_is_kept(contract, tmp_path):
+def test_import_contract_is_kept(contract, tmp_path, child_env):
     pytest.importorskip("importlinter")
-    # This checkout's package, not whichever copy an editable install points at; the cache goes to tmp_path.
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
-           "NO_COLOR": "1", "COLUMNS": "120"}
+    # child_env: this checkout's package is analysed, not an editable install's; the cache goes to tmp_path.
     proc = subprocess.run([sys.executable, "-c", LINT_IMPORTS, "--config", str(CONFIG), "--contract", contract,
                            "--no-logo", "--cache-dir", str(tmp_path / "cache")],
-                          cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+                          cwd=REPO, env={**child_env, "NO_COLOR": "1", "COLUMNS": "120"}, capture_output=True,
+                          text=True, timeout=300)
     report = (proc.stdout + proc.stderr).strip()
     if proc.returncode != 0 or "Contracts: 1 kept, 0 broken." not in report:
         pytest.fail(f"import-linter contract {contract!r} is broken (exit {proc.returncode}):\n\n{report}",
