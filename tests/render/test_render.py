@@ -12,13 +12,8 @@ from scipy.ndimage import gaussian_filter
 
 from simspad.errors import SimSpadError
 from simspad.io.exr import write_exr
-from simspad.motion.trajectory import (
-    Trajectory,
-    TrajectorySet,
-    linear_pan,
-    look_at,
-    static_pose,
-)
+from simspad.motion.generators import linear_pan, static_pose
+from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 from simspad.physics import radiometry as rad
 from simspad.radiance.timeline import Timeline
 from simspad.render import schedule as sch

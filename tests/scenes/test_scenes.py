@@ -12,7 +12,7 @@ from PIL import Image
 from scipy.ndimage import gaussian_filter
 
 from simspad.errors import SimSpadError
-from simspad.motion.trajectory import load_trajectory
+from simspad.io.trajectory_files import load_trajectory
 from simspad.radiance.timeline import Timeline
 from simspad.render.renderer import render_sequence
 from simspad.scenes.library import (
