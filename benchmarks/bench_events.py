@@ -305,7 +305,7 @@ def streaming_memory(size: int, lengths: tuple[int, ...], rate_hz: float) -> lis
     import sys
     import tempfile
 
-    from simspad.radiance.timeline import write_render_dir
+    from simspad.io.render_dir import write_render_dir
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -26,14 +26,29 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
+from scipy.ndimage import gaussian_filter
+from scipy.spatial.transform import Rotation
+
+from simspad import defaults
+from simspad.io.exr import write_exr
+from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
+from simspad.physics.radiometry import luminance_from_rgb
+from simspad.radiance.timeline import Timeline
+from simspad.render.flow import camera_poses, object_poses
+from simspad.render.mitsuba_scene import MitsubaScene
+from simspad.render.renderer import render_sequence, select_variant
+from simspad.render.schedule import brute_force_keyframes, focal_length_px
+from simspad.scenes.library import resolve_scene
+from simspad.sensors.presets import SpadParams
 
 HERE = Path(__file__).resolve().parent
 FOV_DEG = 45.0
 DURATION_S = 0.04
 PEAK_FLOW_PX_S = 1000.0  # the pan's peak image speed at the image border
 SPEED_PROFILE_POWER = 6  # yaw rate ∝ sin^6(πt/T): a burst in the middle third
-DEFAULT_MAX_FLOW_PX = 0.5
-DEFAULT_MIN_RATE_HZ = 1000.0
+DEFAULT_MAX_FLOW_PX = defaults.MAX_FLOW_PX
+DEFAULT_MIN_RATE_HZ = defaults.MIN_KEYFRAME_RATE_HZ
 
 
 def natural_texture(size: int, rng) -> np.ndarray:
@@ -50,10 +65,6 @@ def write_scene(folder: Path, texture: str = "natural") -> Path:
     ``texture="natural"``: 1/f noise plus sharp-edged tiles on wall and boxes; ``"fine"``: adds white-ish detail
     at the texel scale (about 0.6 px here); ``"checker"``: high-contrast point-sampled checks on the boxes.
     """
-    from scipy.ndimage import gaussian_filter
-
-    from simspad.io.exr import write_exr
-
     rng = np.random.default_rng(7)
     size = 1024
     tex = natural_texture(size, rng)
@@ -101,12 +112,6 @@ def write_scene(folder: Path, texture: str = "natural") -> Path:
 def pan_trajectory(width: int):
     """A burst pan: yaw rate ∝ sin⁶(πt/T) (nearly still for the first and last third), peaking at PEAK_FLOW_PX_S at
     the image border, plus a slight translation for parallax between wall and boxes."""
-    from scipy.integrate import cumulative_trapezoid
-    from scipy.spatial.transform import Rotation
-
-    from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
-    from simspad.render.schedule import focal_length_px
-
     focal = focal_length_px(FOV_DEG, width)
     x_border = 0.5 * width / focal
     peak_rad_s = PEAK_FLOW_PX_S / (focal * (1 + x_border**2))
@@ -127,28 +132,20 @@ def rel_rmse(tl, refs: dict[float, np.ndarray]) -> float:
 
 def uniform_timeline(scene, ts, n: int, res, spp, out: Path):
     """The naive reference: n keyframes evenly spaced, rendered with the same renderer."""
-    from simspad.render.renderer import render_sequence
-
     # min_rate with a huge max_flow forces exactly evenly spaced keyframes.
     rate = (n - 1) / DURATION_S * (1 + 1e-9)
     render_sequence(scene, ts, duration_s=DURATION_S, resolution=res, spp=spp, max_flow_px=1e9, min_rate_hz=rate,
                     out_dir=out, progress=False)
-    from simspad.radiance.timeline import Timeline
-
     return Timeline.open(out)
 
 
 def reference_frames(scene, ts, instants, res, spp, seed=0) -> dict[float, np.ndarray]:
     """Brute-force renders (luminance) at the given instants, same sensor, sampler and seed as the keyframes."""
-    from simspad.physics.radiometry import luminance_from_rgb
-    from simspad.render.renderer import _MitsubaScene, _object_poses, _poses
-    from simspad.scenes.library import resolve_scene
-
-    ms = _MitsubaScene(resolve_scene(scene), ts, res[0], res[1], spp)
+    ms = MitsubaScene(resolve_scene(scene), ts, res[0], res[1], spp)
     refs = {}
-    poses = _poses(ts, ms.rest_camera_to_world, np.asarray(instants))
+    poses = camera_poses(ts, ms.rest_camera_to_world, np.asarray(instants))
     for t, pose in zip(instants, poses):
-        ms.set_pose(pose, _object_poses(ts, t))
+        ms.set_pose(pose, object_poses(ts, t))
         refs[float(t)] = luminance_from_rgb(ms.render_radiance(seed)).astype(np.float64)
     return refs
 
@@ -176,15 +173,12 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     res = tuple(int(v) for v in args.resolution.split("x"))
 
-    from simspad.radiance.timeline import Timeline
-    from simspad.render.renderer import render_sequence, select_variant
-    from simspad.render.schedule import SPAD_BIN_S, brute_force_keyframes
-
     variant = select_variant()
     work = Path(tempfile.mkdtemp(prefix="bench_render-"))
     scene = write_scene(work / "scene", args.texture)
     ts = pan_trajectory(res[0])
-    n_bins = brute_force_keyframes(DURATION_S, SPAD_BIN_S)
+    spad_bin_s = SpadParams().bin_s
+    n_bins = brute_force_keyframes(DURATION_S, spad_bin_s)
     print(f"scene: {args.texture}-textured wall + 3 boxes, {res[0]}x{res[1]}, {args.spp} spp, variant {variant}")
     print(f"motion: {DURATION_S * 1e3:g} ms yaw pan, speed ∝ sin^{SPEED_PROFILE_POWER}(πt/T), peak {PEAK_FLOW_PX_S:g} "
           "px/s at the image border")
@@ -207,7 +201,8 @@ def main(argv=None) -> int:
 
     default_rmse = rel_rmse(Timeline.open(work / "default"), refs)
     print(f"\ndefaults (max_flow {DEFAULT_MAX_FLOW_PX} px, min rate {DEFAULT_MIN_RATE_HZ:g} Hz): "
-          f"{s.n_keyframes} renders vs {n_bins} (one per 10.24 µs bin) -> {n_bins / s.n_keyframes:.1f}x fewer; "
+          f"{s.n_keyframes} renders vs {n_bins} (one per {spad_bin_s * 1e6:g} µs bin) -> "
+          f"{n_bins / s.n_keyframes:.1f}x fewer; "
           f"interpolation RMSE {default_rmse * 100:.3f} % of mean luminance")
     if s.compiled_first_frame >= 0:
         print(f"kernels new to the process: {s.compiled_first_frame} while rendering the first frame, "
@@ -245,7 +240,7 @@ def main(argv=None) -> int:
         ratio = np.median(timing["scalar_rgb"][1:]) / np.median(timing["llvm_ad_rgb"][1:])
         print(f"  scalar / llvm time per frame: {ratio:.1f}x")
 
-    import matplotlib
+    import matplotlib  # deferred: heavy, and only the plot needs it
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

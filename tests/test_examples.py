@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simspad.radiance.timeline import write_render_dir
+from simspad.io.render_dir import write_render_dir
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.simulate import simulate_recording
 

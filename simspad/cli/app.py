@@ -55,12 +55,12 @@ def cli(debug: bool) -> None:
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own)."""
-    from simspad.render.renderer import render_sequence
+    from simspad.cli.render import describe_render, render_from_cli
 
-    summary = render_sequence(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
+    summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
                               out_dir=out_dir, progress=True)
-    click.echo(summary.describe())
+    click.echo(describe_render(summary))
 
 
 @cli.command()
@@ -151,7 +151,7 @@ def info(path):
               help="Render every built-in scene into one tone-mapped PNG.")
 def scenes(contact_sheet):
     """List the built-in scenes and their default trajectories."""
-    from simspad.scenes.library import scenes_from_cli
+    from simspad.cli.scenes import scenes_from_cli
 
     scenes_from_cli(contact_sheet=contact_sheet)
 

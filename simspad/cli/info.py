@@ -47,14 +47,14 @@ def describe(path) -> str:
         return describe_recording(path)
     if suffix == ".toml":
         if _is_trajectory_toml(path):
-            from simspad.motion.trajectory import describe_trajectory
+            from simspad.cli.describe_trajectory import describe_trajectory
 
             return describe_trajectory(path)
         from simspad.dataset.spec import describe_spec
 
         return describe_spec(path)
     if suffix in _TRAJECTORY_SUFFIXES:
-        from simspad.motion.trajectory import describe_trajectory
+        from simspad.cli.describe_trajectory import describe_trajectory
 
         return describe_trajectory(path)
     raise SimSpadError(f"unknown kind of file {path.suffix or '(no suffix)'!r} (expected a spec .toml, a trajectory "

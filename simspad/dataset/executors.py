@@ -68,6 +68,7 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         _apply_environment(env)
         from simspad.io.atomic import atomic_path
         from simspad.render.renderer import render_sequence, select_variant
+        from simspad.sensors.presets import SpadParams
 
         select_variant()  # the variant is per process: set it inside the worker, never inherit it
         seq = task.sequence
@@ -76,7 +77,8 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
             with atomic_path(final) as tmp:
                 render_sequence(seq.scene, seq.trajectory, duration_s=seq.duration_s, start_s=seq.start_s,
                                 resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
-                                min_rate_hz=seq.min_rate_hz, seed=task.seed, out_dir=tmp, progress=False)
+                                min_rate_hz=seq.min_rate_hz, seed=task.seed, out_dir=tmp, progress=False,
+                                spad_bin_s=SpadParams().bin_s)
         return {"ok": True, "seconds": time.perf_counter() - t0, "n_keyframes": _count_keyframes(final),
                 "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed

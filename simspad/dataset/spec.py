@@ -493,7 +493,7 @@ def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None
 def _check_trajectory(trajectory: str | None, scene: str, start_s: float, duration_s: float, where: str,
                       err: _Errors) -> None:
     """Read the sequence's trajectory (its own or the scene's default) and check it spans the sequence."""
-    from simspad.motion.trajectory import load_trajectory
+    from simspad.io.trajectory_files import load_trajectory
 
     field_name = f"{where}.trajectory"
     if trajectory is None:

@@ -11,8 +11,6 @@ Values are luminance ``Y`` (from linear sRGB with :func:`simspad.physics.radiome
 
 from __future__ import annotations
 
-import json
-import math
 from collections import OrderedDict
 from pathlib import Path
 from typing import Iterator
@@ -20,12 +18,9 @@ from typing import Iterator
 import numpy as np
 
 from simspad.errors import InputError
-from simspad.io.exr import read_exr, read_exr_info
+from simspad.io.render_dir import read_keyframe, read_render_dir
 from simspad.physics.radiometry import Optics, flux_scale, luminance_from_rgb
 
-TIMELINE_FORMAT = "simspad-timeline"
-TIMELINE_VERSION = 1
-TIMELINE_FILE = "timeline.json"
 #: Instants this close outside [t_start, t_end] (seconds) are clamped, so bin edges computed as
 #: t0 + n·bin_s do not fail on round-off.
 TIME_TOLERANCE_S = 1e-9
@@ -143,7 +138,7 @@ class Timeline:
 
     @classmethod
     def open(cls, render_dir: str | Path, *, cache_frames: int = DEFAULT_CACHE_FRAMES) -> "Timeline":
-        """Open and validate a render directory (DESIGN §5).
+        """Open and validate a render directory (DESIGN §5; format in :mod:`simspad.io.render_dir`).
 
         Checks ``timeline.json`` (format, version, size, keyframe instants and files, optional poses) and every
         frame's EXR header (size, channels). Pixel values (NaN, negative radiance) are checked as each frame is
@@ -154,83 +149,19 @@ class Timeline:
         InputError
             Naming the file and the field at fault.
         """
-        render_dir = Path(render_dir)
-        meta_path = render_dir / TIMELINE_FILE
-        if not render_dir.is_dir():
-            raise InputError("render directory does not exist", path=render_dir)
-        if not meta_path.is_file():
-            raise InputError(f"missing {TIMELINE_FILE}: not a render directory", path=render_dir)
-        try:
-            meta = json.loads(meta_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(f"not valid JSON ({exc})", path=meta_path) from None
-        if not isinstance(meta, dict):
-            raise InputError("expected a JSON object", path=meta_path)
-        if meta.get("format") != TIMELINE_FORMAT:
-            raise InputError(f"expected {TIMELINE_FORMAT!r}, got {meta.get('format')!r}", path=meta_path,
-                             field="format")
-        if meta.get("version") != TIMELINE_VERSION:
-            raise InputError(f"unsupported version {meta.get('version')!r} (this reader knows {TIMELINE_VERSION})",
-                             path=meta_path, field="version")
-        width, height = (_positive_int(meta, key, meta_path) for key in ("width", "height"))
-        keyframes = meta.get("keyframes")
-        if not isinstance(keyframes, list) or not keyframes:
-            raise InputError("expected a non-empty list of {t, file}", path=meta_path, field="keyframes")
-
-        times, files, poses = [], [], []
-        for i, kf in enumerate(keyframes):
-            field = f"keyframes[{i}]"
-            if not isinstance(kf, dict):
-                raise InputError("expected an object {t, file}", path=meta_path, field=field)
-            t = kf.get("t")
-            if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
-                raise InputError(f"expected a finite time in seconds, got {t!r}", path=meta_path, field=f"{field}.t")
-            if times and t <= times[-1]:
-                raise InputError(f"times must be strictly increasing: {t!r} follows {times[-1]!r}", path=meta_path,
-                                 field=f"{field}.t")
-            name = kf.get("file")
-            if not isinstance(name, str) or not name:
-                raise InputError("expected a frame file name", path=meta_path, field=f"{field}.file")
-            file = render_dir / name
-            if not file.is_file():
-                raise InputError(f"frame file {name!r} is missing", path=meta_path, field=f"{field}.file")
-            info = read_exr_info(file)
-            if (info.width, info.height) != (width, height):
-                raise InputError(f"size {info.width}x{info.height} differs from timeline.json's {width}x{height}",
-                                 path=file, field="dataWindow")
-            if "camera_to_world" in kf:
-                pose = np.asarray(kf["camera_to_world"], dtype=object)
-                try:
-                    pose = pose.astype(np.float64)
-                except (TypeError, ValueError):
-                    pose = None
-                if pose is None or pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-                    raise InputError("expected a finite 4x4 matrix", path=meta_path, field=f"{field}.camera_to_world")
-                poses.append(pose)
-            times.append(float(t))
-            files.append((file, info))
-        if poses and len(poses) != len(times):
-            raise InputError("camera_to_world must be given for every keyframe or for none", path=meta_path,
-                             field="keyframes[].camera_to_world")
-        has_depth = all(info.depth_channel is not None for _, info in files)
+        index = read_render_dir(render_dir)
 
         def load(i: int) -> dict:
-            file, info = files[i]
-            data = read_exr(file)
-            radiance = data.get("rgb", data.get("y"))
-            if radiance.shape[:2] != (height, width):
-                raise InputError(f"size {radiance.shape[1]}x{radiance.shape[0]} differs from timeline.json's "
-                                 f"{width}x{height}", path=file, field="dataWindow")
-            _check_radiance(radiance, file, "R,G,B" if "rgb" in data else "Y")
+            data = read_keyframe(index.files[i], index.width, index.height)
             frame = {"y": luminance_from_rgb(data["rgb"]) if "rgb" in data else data["y"]}
             if "rgb" in data:
                 frame["rgb"] = data["rgb"]
-            if has_depth:
+            if index.has_depth:
                 frame["z"] = data["z"]
             return frame
 
-        return cls(times, _FrameCache(load, cache_frames), width=width, height=height, has_depth=has_depth,
-                   poses=np.stack(poses) if poses else None, meta=meta, render_dir=render_dir)
+        return cls(index.times_s, _FrameCache(load, cache_frames), width=index.width, height=index.height,
+                   has_depth=index.has_depth, poses=index.poses, meta=index.meta, render_dir=index.render_dir)
 
     # ------------------------------------------------------------------ basic properties
     @property
@@ -381,84 +312,3 @@ class Timeline:
         if not (self.t_start - TIME_TOLERANCE_S <= t <= self.t_end + TIME_TOLERANCE_S):
             raise ValueError(f"t = {t!r} s is outside the timeline [{self.t_start!r}, {self.t_end!r}] s")
         return min(max(t, self.t_start), self.t_end)
-
-
-def _positive_int(meta: dict, key: str, path: Path) -> int:
-    value = meta.get(key)
-    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-        raise InputError(f"expected a positive integer, got {value!r}", path=path, field=key)
-    return value
-
-
-def _check_radiance(radiance: np.ndarray, file: Path, channels: str) -> None:
-    bad = ~np.isfinite(radiance)
-    if bad.any():
-        row, col = np.argwhere(bad)[0][:2]
-        raise InputError(f"radiance is NaN or infinite at pixel (row {row}, col {col})", path=file, field=channels)
-    if (radiance < 0).any():
-        row, col = np.argwhere(radiance < 0)[0][:2]
-        raise InputError(f"negative radiance {radiance[row, col]} at pixel (row {row}, col {col})", path=file,
-                         field=channels)
-
-
-# ---------------------------------------------------------------------- writing render directories
-def keyframe_filename(index: int) -> str:
-    """Relative path of keyframe ``index`` inside a render directory."""
-    return f"frames/{index:06d}.exr"
-
-
-def write_timeline_json(render_dir: str | Path, *, width: int, height: int, keyframes: list[dict],
-                        **meta) -> Path:
-    """Write ``timeline.json`` atomically (the last step of a render: its presence marks the directory complete).
-
-    Parameters
-    ----------
-    keyframes : list of dict
-        ``{"t": seconds, "file": relative path, "camera_to_world": 4x4 list (optional)}``, strictly increasing t.
-    **meta
-        Further top-level fields (``scene``, ``trajectory``, ``renderer``, ...); must be JSON-serialisable.
-    """
-    from simspad.io.atomic import atomic_path
-
-    doc = {"format": TIMELINE_FORMAT, "version": TIMELINE_VERSION, "width": int(width), "height": int(height),
-           "keyframes": keyframes, "radiance_units": meta.pop("radiance_units", "relative"), **meta}
-    path = Path(render_dir) / TIMELINE_FILE
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(doc, indent=1))
-    return path
-
-
-def write_render_dir(render_dir: str | Path, times_s, frames, depth=None, poses=None, **meta) -> Path:
-    """Write a complete render directory from arrays (tests, converters, other renderers' output).
-
-    Parameters
-    ----------
-    times_s : array (K,)
-        Strictly increasing instants, seconds.
-    frames : array (K, H, W, 3) linear sRGB, or (K, H, W) luminance Y
-    depth : array (K, H, W), optional
-        Depth in metres, stored as channel ``Z``.
-    poses : array (K, 4, 4), optional
-        Camera-to-world matrices.
-    """
-    from simspad.io.exr import write_exr
-
-    render_dir = Path(render_dir)
-    times = np.asarray(times_s, dtype=np.float64)
-    frames = np.asarray(frames, dtype=np.float32)
-    if np.any(np.diff(times) <= 0):
-        raise ValueError("times_s must be strictly increasing")
-    keyframes = []
-    for i, t in enumerate(times):
-        channels = ({"R": frames[i, ..., 0], "G": frames[i, ..., 1], "B": frames[i, ..., 2]} if frames.ndim == 4
-                    else {"Y": frames[i]})
-        if depth is not None:
-            channels["Z"] = np.asarray(depth[i], dtype=np.float32)
-        name = keyframe_filename(i)
-        write_exr(render_dir / name, channels)
-        kf = {"t": float(t), "file": name}
-        if poses is not None:
-            kf["camera_to_world"] = np.asarray(poses[i], dtype=np.float64).tolist()
-        keyframes.append(kf)
-    return write_timeline_json(render_dir, width=frames.shape[2], height=frames.shape[1], keyframes=keyframes,
-                               **meta)

@@ -16,12 +16,17 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from simspad.io.atomic import atomic_path
+from simspad.io.trajectory_files import load_trajectory
 from simspad.physics.colour import srgb_encode
 from simspad.physics.radiometry import luminance_from_rgb
+from simspad.radiance.timeline import Timeline
+from simspad.render.renderer import render_sequence
+from simspad.scenes.library import resolve_scene
 
-#: Rec. 709 luminance weights of linear sRGB.
-TILE_SIZE = (240, 180)  # width, height in pixels
+#: Size of one tile (width, height) in pixels and its samples per pixel.
+TILE_SIZE = (240, 180)
 TILE_SPP = 64
+#: Height of the name strip above each tile, pixels.
 LABEL_HEIGHT_PX = 18
 
 
@@ -49,11 +54,6 @@ def tone_map(rgb: np.ndarray, key: float = 0.18, white_percentile: float = 99.5)
 
 def render_preview(scene, resolution=TILE_SIZE, spp: int = TILE_SPP, seed: int = 0) -> np.ndarray:
     """Linear RGB ``[H, W, 3]`` of ``scene`` at t = start of its default trajectory (a 1 ms, 2-keyframe render)."""
-    from simspad.motion.trajectory import load_trajectory
-    from simspad.radiance.timeline import Timeline
-    from simspad.render.renderer import render_sequence
-    from simspad.scenes.library import resolve_scene
-
     info = resolve_scene(scene)
     t0 = load_trajectory(info.default_trajectory).t_start if info.default_trajectory else 0.0
     with tempfile.TemporaryDirectory(prefix="simspad-sheet-") as tmp:

@@ -70,12 +70,12 @@ def select_variant(prefer: str | None = None) -> str:
     reason = "no libLLVM found (set DRJIT_LIBLLVM_PATH)" if lib is None else None
     if lib is not None:
         try:
-            import drjit as dr
+            import drjit as dr  # deferred: DRJIT_LIBLLVM_PATH must be set before Dr.Jit initialises LLVM
 
             if not dr.has_backend(dr.JitBackend.LLVM):
                 raise RuntimeError(f"Dr.Jit cannot use {lib}")
             variant = _set(LLVM_VARIANT)
-            import drjit.llvm as drl
+            import drjit.llvm as drl  # deferred: heavy, and only once the LLVM variant is set
 
             drl.Float([1.0, 2.0]).numpy()  # initialise the backend now, not inside the first render
             return variant
@@ -88,7 +88,7 @@ def select_variant(prefer: str | None = None) -> str:
 
 
 def _set(variant: str) -> str:
-    import mitsuba as mi
+    import mitsuba as mi  # deferred: heavy, and after DRJIT_LIBLLVM_PATH is set
 
     if mi.variant() != variant:
         mi.set_variant(variant)

@@ -13,10 +13,6 @@ from typing import Callable
 
 import numpy as np
 
-from simspad.sensors.presets import SpadParams
-
-#: The SPAD preset's bin (SwissSPAD2: 10.24 µs, 97.7 kHz): the rate a brute-force renderer would need.
-SPAD_BIN_S = SpadParams().bin_s
 #: Grid cells per smallest keyframe interval when integrating the predicted image speed.
 _CELLS_PER_STEP = 4
 #: Image points per axis at which the camera-induced flow is evaluated (its maximum lies on the border).
@@ -159,6 +155,8 @@ def focal_length_px(x_fov_deg: float, width: int) -> float:
     return 0.5 * width / math.tan(math.radians(x_fov_deg) / 2)
 
 
-def brute_force_keyframes(duration_s: float, bin_s: float = SPAD_BIN_S) -> int:
-    """Keyframes a renderer without adaptive sampling would need: one per SPAD bin (plus the end)."""
+def brute_force_keyframes(duration_s: float, bin_s: float) -> int:
+    """Keyframes a renderer without adaptive sampling would need: one per SPAD bin of ``bin_s`` seconds (plus the
+    end). The bin is the sensor preset's (:class:`simspad.sensors.presets.SpadParams`), passed in by the caller:
+    the renderer imports no sensor."""
     return int(math.ceil(duration_s / bin_s - 1e-9)) + 1

@@ -149,32 +149,7 @@ def content_hash(info: SceneInfo) -> str:
     return digest.hexdigest()
 
 
-def scenes_from_cli(contact_sheet: Path | None = None) -> None:
-    """``simspad scenes``: print the built-in scenes; optionally render all of them into one contact sheet."""
-    import click
-
-    scenes = list_scenes()
-    width = max((len(s.name) for s in scenes), default=4)
-    trajs = [_display_path(s.default_trajectory) if s.default_trajectory else "-" for s in scenes]
-    traj_width = max((len(t) for t in trajs), default=1)
-    for s, traj in zip(scenes, trajs):
-        objs = f"  [animated: {', '.join(s.objects)}]" if s.objects else ""
-        click.echo(f"{s.name:<{width}}  {traj:<{traj_width}}  {s.description}{objs}")
-    if contact_sheet is not None:
-        from simspad.render.contact_sheet import write_contact_sheet
-
-        path = write_contact_sheet(Path(contact_sheet), scenes)
-        click.echo(f"wrote {path}")
-
-
 # --------------------------------------------------------------------------------------------- internals
-
-
-def _display_path(path: Path) -> str:
-    try:
-        return path.resolve().relative_to(REPO_ROOT).as_posix()
-    except ValueError:
-        return str(path)
 
 
 def _hashable_files(root: Path):

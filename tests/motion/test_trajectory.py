@@ -10,19 +10,10 @@ from scipy.spatial.transform import Rotation
 
 from simspad.cli import main
 from simspad.errors import InputError
-from simspad.motion.trajectory import (
-    Trajectory,
-    TrajectorySet,
-    handheld_shake,
-    linear_pan,
-    load_trajectory,
-    look_at,
-    motion_summary,
-    object_rotation,
-    orbit,
-    save_trajectory,
-    static_pose,
-)
+from simspad.io.trajectory_files import load_trajectory, save_trajectory
+from simspad.motion.generators import handheld_shake, linear_pan, object_rotation, orbit, static_pose
+from simspad.motion.summary import motion_summary
+from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -9,8 +9,9 @@ import pytest
 from scipy.integrate import quad_vec
 
 from simspad.errors import InputError
+from simspad.io.render_dir import write_render_dir
 from simspad.physics import radiometry as rad
-from simspad.radiance.timeline import Timeline, write_render_dir
+from simspad.radiance.timeline import Timeline
 
 H, W = 6, 8
 

@@ -3,26 +3,26 @@
 Scenes are tiny Mitsuba XML folders written into ``tmp_path`` (≤ 48×32 px, ≤ 16 spp).
 """
 
+import json
 import math
-import os
 
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
+from scipy.spatial.transform import Rotation
 
+from simspad.cli import main
 from simspad.errors import SimSpadError
 from simspad.io.exr import write_exr
-from simspad.motion.trajectory import (
-    Trajectory,
-    TrajectorySet,
-    linear_pan,
-    look_at,
-    static_pose,
-)
+from simspad.motion.generators import linear_pan, static_pose
+from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 from simspad.physics import radiometry as rad
 from simspad.radiance.timeline import Timeline
 from simspad.render import schedule as sch
-from simspad.render.renderer import _CompileCounter, render_sequence, select_variant
+from simspad.render.mitsuba_scene import CompileCounter, emitter_order, load_canonical
+from simspad.render.renderer import render_sequence, select_variant
+from simspad.scenes.library import resolve_scene, scene_dict_or_file
+from simspad.sensors.presets import SpadParams
 
 W, H = 48, 32
 FOV_DEG = 40.0
@@ -64,8 +64,6 @@ def _textured_folder(root):
 
 def _pan(velocity_m_s=(1.0, 0.0, 0.0), duration_s=0.2, yaw_rate_deg_s=0.0):
     pose = look_at((0.0, 0.0, CAMERA_Z), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0))
-    from scipy.spatial.transform import Rotation
-
     cam = linear_pan(pose[:3, 3], Rotation.from_matrix(pose[:3, :3]).as_quat(), velocity_m_s=velocity_m_s,
                      yaw_rate_deg_s=yaw_rate_deg_s, duration_s=duration_s, rate_hz=200.0)
     return TrajectorySet(camera=cam, objects={}, source="<pan>")
@@ -113,16 +111,30 @@ def test_no_kernel_recompilation_while_only_poses_change(tmp_path, _variant):
     s = render_sequence(folder, _pan(), duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=200.0,
                         out_dir=tmp_path / "r", progress=False)
     assert s.n_rendered >= 6
-    assert s.compiled_after_first == 0, s.describe()
+    assert s.compiled_after_first == 0, s
     tl = Timeline.open(s.out_dir)
     assert not np.array_equal(tl.keyframe(0), tl.keyframe(tl.n_keyframes - 1))  # the camera did move
     # The counter does see compilations: a different integrator needs new kernels.
-    import mitsuba as mi
+    import mitsuba as mi  # deferred: heavy; imported once the variant is set
 
-    counter = _CompileCounter(_variant)
+    counter = CompileCounter(_variant)
     scene = mi.load_file(str(folder / "scene.xml"))
     mi.render(scene, integrator=mi.load_dict({"type": "direct", "emitter_samples": 3}), spp=1, seed=0).numpy()
     assert counter.take() > 0
+
+
+def test_simspad_render_compares_with_the_spad_preset_bin(tmp_path, capsys):
+    # The renderer knows no sensor: the CLI passes the SPAD preset's bin, and the comparison reaches the
+    # printed summary and timeline.json.
+    folder = _scene_folder(tmp_path / "scene")
+    out = tmp_path / "r"
+    assert main(["render", str(folder), "--duration", "0.002", "--resolution", f"{W}x{H}", "--spp", "1",
+                 "--out", str(out)]) == 0
+    n_bins = sch.brute_force_keyframes(0.002, SpadParams().bin_s)
+    assert f"versus one per 10.24 µs SPAD bin: {n_bins} renders" in capsys.readouterr().out
+    schedule = json.loads((out / "timeline.json").read_text())["schedule"]
+    assert list(schedule) == ["n_keyframes", "n_spad_bins", "max_predicted_flow_px"]
+    assert schedule["n_spad_bins"] == n_bins
 
 
 # ------------------------------------------------------------------------------------------ cache, resume
@@ -249,7 +261,7 @@ def test_object_trajectory_moves_the_mesh(tmp_path):
         assert np.nanmin(tl.keyframe_depth(i)) == pytest.approx(CAMERA_Z - 0.5 - 0.15, rel=0.05)
     # Object speed 60 m/s at 1.35 m: the schedule follows the object, far above the 200 Hz floor.
     assert s.n_keyframes > 0.01 * 200 * 3
-    assert s.compiled_after_first in (0, -1), s.describe()  # moving vertices does not recompile either
+    assert s.compiled_after_first in (0, -1), s  # moving vertices does not recompile either
     assert np.isinf(tl.depth(0.5 * (tl.times_s[0] + tl.times_s[1]))).sum() == 0  # the wall is everywhere behind
 
 
@@ -278,9 +290,7 @@ def test_bad_input_is_one_clear_error_and_nothing_is_written(tmp_path):
 
 
 def test_timeline_reads_mitsuba_written_exr(tmp_path):
-    import json
-
-    import mitsuba as mi
+    import mitsuba as mi  # deferred: heavy; imported once the variant is set
 
     rgb = np.random.default_rng(0).random((H, W, 3)).astype(np.float32)
     (tmp_path / "f").mkdir()
@@ -297,12 +307,9 @@ def test_scene_loads_list_emitters_in_canonical_order():
     # Mitsuba 3.9 permutes emitters between loads; emitter sampling picks by index, so without a canonical order
     # the same render seed gives different noise in different processes (office has three emitters).
     select_variant()
-    import mitsuba as mi
-
-    from simspad.render.renderer import _emitter_order, _load_canonical
-    from simspad.scenes.library import resolve_scene, scene_dict_or_file
+    import mitsuba as mi  # deferred: heavy; imported once the variant is set
 
     source = scene_dict_or_file(resolve_scene("office"))
-    orders = {tuple(_emitter_order(_load_canonical(mi, source, "office"))) for _ in range(8)}
+    orders = {tuple(emitter_order(load_canonical(mi, source, "office"))) for _ in range(8)}
     assert len(orders) == 1 and list(next(iter(orders))) == sorted(next(iter(orders)))
     assert len(next(iter(orders))) >= 3

@@ -4,23 +4,20 @@ are refused, and ``simspad scenes`` lists and draws them."""
 
 from __future__ import annotations
 
-import math
+import json
 
 import numpy as np
 import pytest
 from PIL import Image
 from scipy.ndimage import gaussian_filter
 
+from simspad.cli import main
 from simspad.errors import SimSpadError
-from simspad.motion.trajectory import load_trajectory
+from simspad.io.trajectory_files import load_trajectory
 from simspad.radiance.timeline import Timeline
+from simspad.render.contact_sheet import LABEL_HEIGHT_PX, tone_map, write_contact_sheet
 from simspad.render.renderer import render_sequence
-from simspad.scenes.library import (
-    builtin_scene_names,
-    list_scenes,
-    resolve_scene,
-    scenes_from_cli,
-)
+from simspad.scenes.library import builtin_scene_names, list_scenes, resolve_scene
 
 REQUIRED = {"office", "piano", "plant", "siemens-star", "fan"}
 SIZE = (48, 36)
@@ -81,8 +78,6 @@ def _disk_mask(render_dir, center_m, radius_m):
 
     Mitsuba's camera looks along local +Z with local +X to the image's left and +Y up.
     """
-    import json
-
     meta = json.loads((render_dir / "timeline.json").read_text())
     cam = np.asarray(meta["keyframes"][0]["camera_to_world"], dtype=np.float64)
     focal = float(meta["renderer"]["focal_px"])
@@ -157,8 +152,6 @@ def test_unknown_scene_is_refused_before_anything_is_written(tmp_path):
 
 
 def test_simspad_scenes_lists_every_scene_with_its_trajectory(capsys):
-    from simspad.cli import main
-
     assert main(["scenes"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == len(builtin_scene_names())
@@ -170,12 +163,6 @@ def test_simspad_scenes_lists_every_scene_with_its_trajectory(capsys):
 
 @pytest.mark.slow
 def test_contact_sheet_tiles_tone_mapped_labelled_renders(tmp_path):
-    from simspad.render.contact_sheet import (
-        LABEL_HEIGHT_PX,
-        tone_map,
-        write_contact_sheet,
-    )
-
     out = write_contact_sheet(tmp_path / "sheet.png", ["fan", "office"], columns=2, resolution=(40, 30), spp=2)
     sheet = np.asarray(Image.open(out).convert("RGB"), dtype=np.float64)
     gap = 4

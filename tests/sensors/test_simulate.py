@@ -11,8 +11,9 @@ import pytest
 from simspad.cli import main
 from simspad.errors import SimSpadError
 from simspad.io.recording import open_recording
+from simspad.io.render_dir import write_render_dir
 from simspad.physics.radiometry import Optics, flux_scale
-from simspad.radiance.timeline import Timeline, write_render_dir
+from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import sensor_params
 from simspad.sensors.simulate import parse_overrides, parse_value, simulate_recording
 
