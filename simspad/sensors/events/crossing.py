@@ -107,9 +107,7 @@ def first_crossing(det, x0, h, d0, dh, theta_on, theta_off, tr0, trh):
         if piece == 0 and xs > 0.0:
             hi = xs
             f_hi = a_off + b_slope * xs + b_slope * tau  # c·exp(−xs/τ) = b_slope·τ there
-        elif piece == 0:
-            hi, f_hi = h, dh
-        elif xs > 0.0:
+        elif piece == 0 or xs > 0.0:  # the only piece, or the one after the stationary point
             hi, f_hi = h, dh
         else:
             break

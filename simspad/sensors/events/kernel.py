@@ -18,9 +18,8 @@ iterations); noise processes cost a multiply per step until they fire.
 
 The kernels take small NamedTuples (numba passes them as structs, at no cost) instead of long positional lists,
 so that no two floats can be swapped at a call: :class:`Knots`, :class:`~.model.PixelMaps`,
-:class:`ModelConstants`, :class:`PixelState`, :class:`EventBuffer` and :class:`Blocks`. An event's pixel, polarity
-and label travel packed in one int64 (``pixel·8 + polarity·4 + label``) from the kernel through the bucket sort:
-two scattered stores per event instead of four.
+:class:`ModelConstants`, :class:`PixelState`, :class:`EventBuffer` and :class:`Blocks`. Events are written with
+their pixel, polarity and label packed in one int64 (:mod:`.codes`).
 """
 
 from __future__ import annotations
@@ -33,6 +32,7 @@ import numpy as np
 
 from simspad.physics.photoreceptor import MIN_CURRENT_E_S, time_constant_pair
 from simspad.physics.rng import exponential, normal, uniform_positive
+from simspad.sensors.events.codes import pack_code
 from simspad.sensors.events.crossing import Detector, first_crossing
 from simspad.sensors.events.model import LABEL_HOT, LABEL_LEAK, LABEL_SHOT, LABEL_SIGNAL
 from simspad.sensors.presets import EventParams
@@ -101,7 +101,7 @@ class PixelState(NamedTuple):
     """SplitMix64 state (uint64)."""
 
     @classmethod
-    def empty(cls, seeds: np.ndarray) -> "PixelState":
+    def empty(cls, seeds: np.ndarray) -> PixelState:
         """Uninitialised state for ``seeds.size`` pixels, their random streams starting at ``seeds`` (copied)."""
         n = seeds.size
         return cls(*(np.empty(n) for _ in range(6)), rng_state=seeds.copy())
@@ -116,7 +116,7 @@ class EventBuffer(NamedTuple):
     """int64 ``pixel·8 + polarity·4 + label``."""
 
     @classmethod
-    def empty(cls, rows: int) -> "EventBuffer":
+    def empty(cls, rows: int) -> EventBuffer:
         return cls(np.empty(rows, np.float64), np.empty(rows, np.int64))
 
 
@@ -128,38 +128,6 @@ class Blocks(NamedTuple):
     pixel_hi: np.ndarray
     start: np.ndarray
     limit: np.ndarray
-
-
-@numba.njit(cache=True, inline="always")
-def pack_code(pixel, polarity, label):
-    """``pixel·8 + polarity·4 + label`` as one int64."""
-    return (np.int64(pixel) << 3) | (np.int64(polarity) << 2) | np.int64(label)
-
-
-@numba.njit(cache=True, parallel=True)
-def unpack_codes(t_s, pix, lo):
-    """Unpack rows ``lo …`` of events given as time (s) and packed code, in parallel; ``pix`` holds the codes on
-    entry and the pixel indices on return (no separate code array to allocate and fault in).
-
-    Returns
-    -------
-    t_us, pol, lab : ndarray
-        µs timestamps (floor of t·10⁶, as :func:`~.simulator.timestamps_us`), polarity and label. Rows before
-        ``lo`` are left uninitialised: they are the room :meth:`EventSimulator.advance` merges the held-back events
-        into.
-    """
-    n = pix.size
-    t_us = np.empty(n, np.int64)
-    pol = np.empty(n, np.uint8)
-    lab = np.empty(n, np.uint8)
-    for j in numba.prange(n - lo):
-        k = lo + j
-        t_us[k] = np.int64(math.floor(t_s[k] * 1e6))
-        c = pix[k]
-        pix[k] = c >> 3
-        pol[k] = np.uint8((c >> 2) & 1)
-        lab[k] = np.uint8(c & 3)
-    return t_us, pol, lab
 
 
 @numba.njit(cache=True)

@@ -21,10 +21,23 @@ import numba
 import numpy as np
 from tqdm import tqdm
 
-from simspad.sensors.events.kernel import (Blocks, EventBuffer, Knots, PixelState, init_state, model_constants,
-                                           simulate_blocks)
-from simspad.sensors.events.model import (LABEL_NAMES, PixelMaps, draw_pixel_maps, sensor_current_1lux_e_s,
-                                          sensor_photocurrent_e_s, validate_params)
+from simspad.sensors.events.kernel import (
+    Blocks,
+    EventBuffer,
+    Knots,
+    PixelState,
+    init_state,
+    model_constants,
+    simulate_blocks,
+)
+from simspad.sensors.events.model import (
+    LABEL_NAMES,
+    PixelMaps,
+    draw_pixel_maps,
+    sensor_current_1lux_e_s,
+    sensor_photocurrent_e_s,
+    validate_params,
+)
 from simspad.sensors.events.sort import EventColumns, merge_front, sort_segments
 from simspad.sensors.presets import EventParams, params_to_attrs
 

@@ -22,7 +22,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from simspad.sensors.events.kernel import EventBuffer, unpack_codes
+from simspad.sensors.events.codes import unpack_codes
+from simspad.sensors.events.kernel import EventBuffer
 
 #: Histogram entries (µs buckets × parts) the parallel bucket sort may hold; it uses fewer parts beyond this.
 _BUCKET_MAX_ENTRIES = 8 << 20
@@ -43,7 +44,7 @@ class EventColumns(NamedTuple):
     """uint8 label code (``LABEL_*``)."""
 
     @classmethod
-    def empty(cls, rows: int) -> "EventColumns":
+    def empty(cls, rows: int) -> EventColumns:
         """``rows`` uninitialised rows."""
         return cls(np.empty(rows), np.empty(rows, np.int64), np.empty(rows, np.int64), np.empty(rows, np.uint8),
                    np.empty(rows, np.uint8))
