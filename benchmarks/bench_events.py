@@ -39,6 +39,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from simspad.physics.photoreceptor import cutoff_hz, shot_noise_rate_hz
 from simspad.physics.radiometry import flux_scale
 from simspad.radiance.timeline import Timeline
 from simspad.sensors import events
@@ -71,9 +72,9 @@ def simspad_events(tl: Timeline, params: EventParams, lux: float, seed: int = 0)
     """Events of the numba simulator over the whole timeline: ``(t_s, pixel, polarity, label)``, sorted."""
     rng = np.random.default_rng(seed)
     maps = events.draw_pixel_maps(params, (tl.height, tl.width), rng)
-    current_1lux = events.reference_current_1lux(float(tl.keyframe(0).mean()), lux, params)
+    current_1lux = events.sensor_current_1lux_e_s(float(tl.keyframe(0).mean()), lux, params)
     sim = events.EventSimulator(params, (tl.height, tl.width),
-                                events.photocurrent_e_s(tl.sample(tl.t_start), params).ravel(), tl.t_start,
+                                events.sensor_photocurrent_e_s(tl.sample(tl.t_start), params).ravel(), tl.t_start,
                                 current_1lux, maps)
     batches = [sim.advance(knot_t, knot_current)
                for knot_t, knot_current in events.iter_knot_chunks(tl, tl.t_start, tl.t_end, params)]
@@ -107,19 +108,20 @@ def naive_events(tl: Timeline, params: EventParams, lux: float, substeps: int = 
     th_off = maps.threshold_off.reshape(shape)
     leak = (maps.leak_rate_hz * maps.threshold_on).reshape(shape)
     hot = maps.hot_rate_hz.reshape(shape)
-    current_1lux = events.reference_current_1lux(float(tl.keyframe(0).mean()), lux, params)
+    current_1lux = events.sensor_current_1lux_e_s(float(tl.keyframe(0).mean()), lux, params)
     frame_times = np.concatenate([np.linspace(a, b, substeps, endpoint=False)
                                   for a, b in zip(tl.times_s[:-1], tl.times_s[1:])] + [tl.times_s[-1:]])
-    lp = np.log(events.photocurrent_e_s(tl.sample(frame_times[0]), params))
+    lp = np.log(events.sensor_photocurrent_e_s(tl.sample(frame_times[0]), params))
     ref = lp.copy()
     last_t = np.full(shape, -np.inf)
     out_t, out_x, out_y, out_p, out_l = [], [], [], [], []
     t_prev = frame_times[0]
     for t in frame_times[1:]:
         dt = t - t_prev
-        current = events.photocurrent_e_s(tl.sample(t), params)
+        current = events.sensor_photocurrent_e_s(tl.sample(t), params)
         log_i = np.log(current)
-        tau = 1.0 / (2 * np.pi * events.cutoff_hz(current, params))
+        tau = 1.0 / (2 * np.pi * cutoff_hz(current, params.photoreceptor_cutoff_hz_max,
+                                           params.photoreceptor_cutoff_ref_rate_e_s))
         eps = np.minimum(dt / tau, 1.0) if lowpass == "euler" else -np.expm1(-dt / tau)
         lp_new = (1 - eps) * lp + eps * log_i
         ref -= leak * dt
@@ -139,7 +141,8 @@ def naive_events(tl: Timeline, params: EventParams, lux: float, substeps: int = 
                 out_t.append(te), out_x.append(x), out_y.append(y), out_p.append(np.full(x.size, pol, np.uint8))
                 out_l.append(np.zeros(x.size, np.uint8))
         ref += n_on * th_on - n_off * th_off
-        noise_rate = events.shot_noise_rate_hz(current, current_1lux, params)
+        noise_rate = shot_noise_rate_hz(current, current_1lux, params.shot_noise_rate_hz_at_1lux,
+                                        params.shot_noise_current_exponent)
         for rate, label in ((noise_rate, events.LABEL_SHOT), (hot, events.LABEL_HOT)):
             y, x = np.nonzero(rng.random(shape) < rate * dt)
             te = t_prev + dt * rng.random(x.size) + np.maximum(

@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import ndtr
 
+from simspad.physics.photoreceptor import cutoff_hz
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams, sensor_params
 
 DEFAULT_EXPOSURE_S = 10e-3
@@ -137,7 +138,7 @@ def snr_events_db(flux_ph_s_m2, contrast: float, params: EventParams | None = No
     p = params or sensor_params("events")
     eta = p.qe * p.fill_factor
     lam = eta * pixel_flux(flux_ph_s_m2, p.pixel_pitch_m) + p.dark_current_e_s
-    f_c = p.photoreceptor_cutoff_hz_max * lam / (lam + p.photoreceptor_cutoff_ref_rate_e_s)
+    f_c = cutoff_hz(lam, p.photoreceptor_cutoff_hz_max, p.photoreceptor_cutoff_ref_rate_e_s)
     var_log = np.pi * f_c / lam
     delta = math.log1p(contrast) * (1.0 - np.exp(-2 * np.pi * f_c * window_s))
     threshold = 0.5 * (p.threshold_on + p.threshold_off)

@@ -52,6 +52,7 @@ import numpy as np
 
 from simspad.methods.registry import Method
 from simspad.methods.windows import Measurement
+from simspad.physics.photoreceptor import time_constant_s
 
 
 @dataclass(frozen=True)
@@ -93,7 +94,7 @@ class AkfState:
         photocurrent changes little within a frame interval, and the per-event loop then needs no exp)."""
         if params.pr_cutoff_hz_max > 0.0:
             cur = np.exp(self.L) * params.pr_area_m2 + params.pr_dark_e_s
-            self.tau_pr[:] = (cur + params.pr_cutoff_ref_e_s) / (2.0 * np.pi * params.pr_cutoff_hz_max * cur)
+            self.tau_pr[:] = time_constant_s(cur, params.pr_cutoff_hz_max, params.pr_cutoff_ref_e_s)
 
     def events(self, t_s, pix, dl, params: AkfParams) -> None:
         """Apply time-sorted events (numba kernel)."""

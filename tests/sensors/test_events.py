@@ -9,7 +9,9 @@ from scipy import stats
 
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
+from simspad.physics.photoreceptor import cutoff_hz
 from simspad.physics.radiometry import flux_scale
+from simspad.physics.rng import normal, normal_quantile
 from simspad.radiance.timeline import Timeline
 from simspad.sensors import events
 from simspad.sensors.presets import EventParams
@@ -32,6 +34,10 @@ def _run(tmp_path, times, frames, params, seed=0, lux=1000.0, t0=None, t1=None, 
         assert rec.n_events == ev["t"].size
     maps = events.draw_pixel_maps(params, (tl.height, tl.width), np.random.default_rng(seed))
     return ev, attrs, maps
+
+
+def _cutoff_hz(current, params):
+    return cutoff_hz(current, params.photoreceptor_cutoff_hz_max, params.photoreceptor_cutoff_ref_rate_e_s)
 
 
 def _per_pixel(ev, shape, mask=None):
@@ -157,7 +163,7 @@ def test_dim_pixels_lag_as_the_photoreceptor_cutoff_predicts(tmp_path):
         ts = ev["t"][idx == p]
         first[p] = ts.min() * 1e-6 - step_t if ts.size else np.nan
     after = np.repeat(2 * currents, W)
-    tau = 1.0 / (2 * np.pi * events.cutoff_hz(after, params))
+    tau = 1.0 / (2 * np.pi * _cutoff_hz(after, params))
     expected = -tau * np.log(1.0 - maps.threshold_on / np.log(2.0))
     np.testing.assert_allclose(first, expected, rtol=0.03, atol=2e-6)
     assert np.nanmean(first[:W]) > 100 * np.nanmean(first[-W:])
@@ -199,7 +205,7 @@ def test_same_seed_same_events_whatever_the_chunking_and_threads(tmp_path):
 def test_jitter_draws_are_standard_normal():
     """The one-uniform normal quantile used for readout jitter: accurate, and its draws pass a KS test."""
     u = np.concatenate([np.linspace(1e-12, 1 - 1e-12, 20001), [0.02425, 0.97575, 0.5]])
-    z = np.array([events._normal_quantile(v) for v in u])
+    z = np.array([normal_quantile(v) for v in u])
     exact = stats.norm.ppf(u)
     assert np.max(np.abs(z - exact) / np.maximum(1.0, np.abs(exact))) < 2e-9
 
@@ -208,7 +214,7 @@ def test_jitter_draws_are_standard_normal():
         out = np.empty(n)
         s = np.uint64(seed)
         for i in range(n):
-            s, out[i] = events._normal(s)
+            s, out[i] = normal(s)
         return out
 
     x = draws(12345, 200_000)
@@ -223,7 +229,7 @@ def test_overflowing_pixel_block_is_rerun_alone_with_identical_events():
     times = np.array([0.0, 0.002, 0.004, 0.006])
     log_y = np.zeros((4, H, W))
     log_y[:, :8] = np.array([0.0, 4.0, 0.0, 4.0])[:, None, None]  # only the first pixel block is busy
-    current = events.photocurrent_e_s(1e18 * np.exp(log_y), params).reshape(4, H * W)
+    current = events.sensor_photocurrent_e_s(1e18 * np.exp(log_y), params).reshape(4, H * W)
     maps = events.draw_pixel_maps(params, (H, W), np.random.default_rng(2))
     runs = []
     for cap in (None, 1):
@@ -274,14 +280,14 @@ def _per_frame_reference(times, frames, params, maps, frames_per_interval):
     def current(t):
         i = min(np.searchsorted(times, t, side="right") - 1, times.size - 2)
         w = (t - times[i]) / (times[i + 1] - times[i])
-        return events.photocurrent_e_s((1 - w) * frames[i] + w * frames[i + 1], params)
+        return events.sensor_photocurrent_e_s((1 - w) * frames[i] + w * frames[i + 1], params)
 
     lp = np.log(current(frame_t[0]))
     ref = lp.copy()
     out = []
     for t0, t1 in zip(frame_t[:-1], frame_t[1:]):
         cur = current(t1)
-        new = lp - np.expm1(-(t1 - t0) * 2 * np.pi * events.cutoff_hz(cur, params)) * (np.log(cur) - lp)
+        new = lp - np.expm1(-(t1 - t0) * 2 * np.pi * _cutoff_hz(cur, params)) * (np.log(cur) - lp)
         for sign, pol in ((1, 1), (-1, 0)):
             n = np.floor(np.maximum(sign * (new - ref), 0) / th[pol]).astype(np.int64)
             for k in range(1, n.max(initial=0) + 1):

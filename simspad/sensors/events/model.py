@@ -1,0 +1,113 @@
+"""Event camera model (DESIGN §4, preset ``prophesee_gen4``): a per-pixel DVS with exact crossing times.
+
+Per pixel (flattened index ``y·W + x``):
+
+- **photocurrent** ``I(t) = qe·fill·pitch²·Φ(t) + dark_current`` (e⁻ s⁻¹), linear in time between keyframes;
+- **photoreceptor**: first-order low-pass of ``ln I`` with cutoff ``f_c = f_max·I/(I + I_ref)``, so dim pixels
+  lag (``τ = 1/(2π f_c)``; the formulas live in :mod:`simspad.physics.photoreceptor`). It is integrated *exactly*
+  for an input whose log is linear in time over each internal step (:mod:`.kernel`);
+- **change detector**: ON when ``D = L_p − ref + leak·(t − t_ref) ≥ θ_on``, OFF when ``D ≤ −θ_off``; at an event
+  the reference resets to the current ``L_p``. Crossings are solved to 1 ns (:mod:`.crossing`): nothing snaps to
+  keyframes;
+- **thresholds** ``θ ~ N(nominal, threshold_sigma)`` per pixel and polarity, fixed for the recording, clamped to
+  ``≥ threshold_min`` (> 0);
+- **leak**: the reference drifts down at ``leak_rate·θ_on`` per second (log-normal per-pixel rate, median
+  ``leak_rate_hz``): a static pixel emits ON events at that rate. An ON event whose change since the last reset
+  owes more to the drift than to the light is labelled leak (2);
+- **shot noise** (label 1): a Poisson process of random polarity with rate ``r(I) = r₁·(I₁/I)^γ``, where ``I₁`` is
+  the photocurrent of a pixel seeing the scene's mean luminance at 1 lx (plus dark current) and
+  ``r₁ = shot_noise_rate_hz_at_1lux``. Graça & Delbruck (2021) explain why DVS noise rises as light falls: the
+  photocurrent's relative shot-noise amplitude grows as ``1/sqrt(I)``, and in dim light it is no longer offset by a
+  shrinking photoreceptor bandwidth alone. We model the result, not the first-passage process: a power law in the
+  photocurrent, ``γ = shot_noise_current_exponent`` (default 0.5, the amplitude's scaling), calibrated at 1 lx.
+  The rate saturates in the dark because ``I ≥ I_dark``, and the refractory period caps it. Noise events do not
+  move the reference (they are transient excursions), so a static scene yields only noise-labelled events;
+- **hot pixels** (label 3): a fraction of pixels fire an extra Poisson process at ``hot_pixel_rate_hz``;
+- **readout**: timestamp = detection + ``max(0, latency + jitter·z)``; the pixel is blind from detection until
+  ``refractory_s`` after its event is read out, so events of one pixel are ≥ ``refractory_s`` apart; a signal
+  crossing that falls in that window fires when the window ends (if the change still exceeds the threshold).
+
+This module holds what the parameters alone determine: the event labels, the fixed pattern (:class:`PixelMaps`),
+the parameter checks and the sensor's photocurrent.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from simspad.errors import SimSpadError
+from simspad.physics.photoreceptor import photocurrent_e_s, reference_current_1lux
+from simspad.sensors.presets import EventParams
+
+LABEL_SIGNAL, LABEL_SHOT, LABEL_LEAK, LABEL_HOT = 0, 1, 2, 3
+LABEL_NAMES = {LABEL_SIGNAL: "signal", LABEL_SHOT: "shot_noise", LABEL_LEAK: "leak", LABEL_HOT: "hot_pixel"}
+_FIELD = "sensors.events"
+
+
+class PixelMaps(NamedTuple):
+    """Fixed per-pixel properties of one sensor, flattened to ``[H·W]`` (a NamedTuple: numba kernels take it).
+
+    Attributes
+    ----------
+    threshold_on, threshold_off : ndarray float64
+        Contrast thresholds (log units), ≥ ``threshold_min``.
+    leak_rate_hz : ndarray float64
+        Leak event rate (reference drift ``leak_rate_hz·threshold_on`` per second).
+    hot_rate_hz : ndarray float64
+        Extra event rate of hot pixels (0 elsewhere), Hz.
+    rng_state : ndarray uint64
+        Seeds of the per-pixel random streams.
+    """
+
+    threshold_on: np.ndarray
+    threshold_off: np.ndarray
+    leak_rate_hz: np.ndarray
+    hot_rate_hz: np.ndarray
+    rng_state: np.ndarray
+
+
+def draw_pixel_maps(params: EventParams, shape: tuple[int, int], rng: np.random.Generator) -> PixelMaps:
+    """Draw the fixed pattern (in this order: ON, OFF thresholds, leak rates, hot pixels, stream seeds)."""
+    n = int(shape[0]) * int(shape[1])
+    theta_on = params.threshold_on + params.threshold_sigma * rng.standard_normal(n)
+    theta_off = params.threshold_off + params.threshold_sigma * rng.standard_normal(n)
+    leak = params.leak_rate_hz * np.exp(params.leak_rate_log_sigma * rng.standard_normal(n))
+    hot = np.where(rng.random(n) < params.hot_pixel_fraction, params.hot_pixel_rate_hz, 0.0)
+    seeds = rng.integers(0, np.iinfo(np.uint64).max, size=n, dtype=np.uint64, endpoint=True)
+    return PixelMaps(threshold_on=np.maximum(theta_on, params.threshold_min),
+                     threshold_off=np.maximum(theta_off, params.threshold_min),
+                     leak_rate_hz=leak, hot_rate_hz=hot, rng_state=seeds)
+
+
+def validate_params(params: EventParams) -> None:
+    """Raise :class:`SimSpadError` naming the field for values the model cannot use."""
+    checks = [
+        ("threshold_on", params.threshold_on > 0, "must be > 0"),
+        ("threshold_off", params.threshold_off > 0, "must be > 0"),
+        ("threshold_min", params.threshold_min > 0, "must be > 0 (thresholds may never reach 0)"),
+        ("qe", 0 < params.qe <= 1, "must be in (0, 1]"),
+        ("fill_factor", 0 < params.fill_factor <= 1, "must be in (0, 1]"),
+        ("pixel_pitch_m", params.pixel_pitch_m > 0, "must be > 0"),
+        ("photoreceptor_cutoff_hz_max", params.photoreceptor_cutoff_hz_max > 0, "must be > 0"),
+        ("hot_pixel_fraction", params.hot_pixel_fraction <= 1, "must be in [0, 1]"),
+        ("substep_tolerance", 0 < params.substep_tolerance <= 0.1, "must be in (0, 0.1]"),
+    ]
+    for name, ok, message in checks:
+        if not ok:
+            raise SimSpadError(f"{message}, got {getattr(params, name)!r}", field=f"{_FIELD}.{name}")
+
+
+def sensor_photocurrent_e_s(flux_ph_s_m2, params: EventParams) -> np.ndarray:
+    """Photocurrent of this sensor's pixels, e⁻ s⁻¹ (float64), for photon irradiance ``flux_ph_s_m2``
+    (photons s⁻¹ m⁻²): :func:`simspad.physics.photoreceptor.photocurrent_e_s` with the sensor's pixel."""
+    return photocurrent_e_s(flux_ph_s_m2, params.pixel_pitch_m, params.fill_factor, params.qe,
+                            params.dark_current_e_s)
+
+
+def sensor_current_1lux_e_s(mean_flux_ph_s_m2: float, lux: float, params: EventParams) -> float:
+    """``I₁`` of this sensor (shot-noise normalisation), e⁻ s⁻¹:
+    :func:`simspad.physics.photoreceptor.reference_current_1lux` with the sensor's pixel."""
+    return reference_current_1lux(mean_flux_ph_s_m2, lux, params.pixel_pitch_m, params.fill_factor, params.qe,
+                                  params.dark_current_e_s)
