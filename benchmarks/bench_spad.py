@@ -31,7 +31,7 @@ import numpy as np
 
 from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import SpadParams
-from simspad.sensors.spad import SpadChunker, chunk_bins, detection_area_m2, pack_bits
+from simspad.sensors.spad import SpadChunker, chunk_bins, pack_bits
 
 SWISSSPAD2_GBIT_S = 512 * 512 / 10.24e-6 / 1e9  # 25.6
 
@@ -51,7 +51,7 @@ def scene(size: int, duration_s: float, mean_probability: float, params: SpadPar
     base = texture(size, rng)
     times = np.arange(0.0, duration_s + 1e-3, 1e-3)
     modulation = 1.0 + 0.3 * np.sin(2 * np.pi * 37.0 * times)
-    q_gate = detection_area_m2(params) * params.gate_s
+    q_gate = params.detection_area_m2 * params.gate_s
     # find the flux scale giving the mean P(1) over pixels for the unmodulated scene (monotone: bisection)
     lo, hi = 1e-6, 1e6
     for _ in range(80):
@@ -126,7 +126,7 @@ def lux_for_probability(p: float, params: SpadParams) -> float:
     from simspad.physics.radiometry import flux_scale
 
     rate = -math.log1p(-p) / params.bin_s
-    return rate / (flux_scale(1.0, 1.0) * detection_area_m2(params))
+    return rate / (flux_scale(1.0, 1.0) * params.detection_area_m2)
 
 
 # ------------------------------------------------------------------------------------------------ streaming memory

@@ -22,6 +22,7 @@ import numpy as np  # noqa: E402
 
 from simspad.io.recording import open_recording  # noqa: E402
 from simspad.methods.spad_response import estimate_flux, log_flux_variance  # noqa: E402
+from simspad.physics.radiometry import detection_area_m2  # noqa: E402
 
 
 def main() -> None:
@@ -45,7 +46,7 @@ def main() -> None:
             k = int(np.clip(np.searchsorted(t_start, t) - args.bins // 2, 0, max(len(t_start) - args.bins, 0)))
             n = min(args.bins, len(t_start) - k)
             counts = rec.spad_counts(k, k + n)
-            q_m2 = a["qe"] * a["fill_factor"] * a["pixel_pitch_m"] ** 2
+            q_m2 = detection_area_m2(a["pixel_pitch_m"], a["fill_factor"], a["qe"])
             flux = estimate_flux(counts, n, q_m2, a["gate_s"], rec.dcr_cps)
             panels.append((f"SPAD bit plane {k}", rec.spad_bits(k, k + 1)[0], "gray"))
             panels.append((f"SPAD {n} bins, ML estimate", flux, "gray"))

@@ -58,6 +58,7 @@ import numpy as np
 from scipy.special import ndtr
 
 from simspad.physics.photoreceptor import cutoff_hz
+from simspad.physics.radiometry import detection_rate, flux_scale
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams, sensor_params
 
 DEFAULT_EXPOSURE_S = 10e-3
@@ -71,15 +72,15 @@ def _db(ratio) -> np.ndarray:
         return 10.0 * np.log10(ratio)
 
 
-def pixel_flux(flux_ph_s_m2, pixel_pitch_m: float) -> np.ndarray:
-    """Photons s⁻¹ falling on one pixel (before fill factor and qe)."""
-    return np.asarray(flux_ph_s_m2, np.float64) * pixel_pitch_m ** 2
+def _detections_per_s(flux_ph_s_m2, params) -> np.ndarray:
+    """η·Φ_pix = q·Φ: detections (photo-electrons) s⁻¹ of one pixel, with the simulator's detection area."""
+    return detection_rate(np.asarray(flux_ph_s_m2, np.float64), params.pixel_pitch_m, params.fill_factor, params.qe)
 
 
 def snr_frame_db(flux_ph_s_m2, params: FrameParams | None = None, exposure_s: float = DEFAULT_EXPOSURE_S):
     """SNR (dB) of the conventional camera (EMVA 1288); −inf at and beyond full well."""
     p = params or sensor_params("frames")
-    mu_e = p.qe * p.fill_factor * pixel_flux(flux_ph_s_m2, p.pixel_pitch_m) * exposure_s
+    mu_e = _detections_per_s(flux_ph_s_m2, p) * exposure_s
     dark_e = p.dark_current_e_s * exposure_s
     var = mu_e + p.read_noise_e ** 2 + dark_e + 1.0 / (12.0 * p.gain_dn_per_e ** 2)
     snr = _db(mu_e ** 2 / var)
@@ -90,14 +91,13 @@ def snr_spad_free_running_db(flux_ph_s_m2, params: SpadParams | None = None,
                              exposure_s: float = DEFAULT_EXPOSURE_S):
     """SNR (dB) of a free-running SPAD pixel with dead time (Ingle et al. 2019, suppl. note 7; bias re-derived)."""
     p = params or sensor_params("spad")
-    q = p.qe * p.fill_factor
-    phi = pixel_flux(flux_ph_s_m2, p.pixel_pitch_m)
+    q_phi = _detections_per_s(flux_ph_s_m2, p)
     tau = p.dead_time_s
     ap = p.afterpulsing_probability
     with np.errstate(divide="ignore", invalid="ignore"):
-        bias = p.dcr_median_cps / (q * phi) + ap / (1.0 - ap) * np.exp(-q * phi * tau)
-        shot = (1.0 + q * phi * tau) / (q * phi * exposure_s)
-        quant = (1.0 + q * phi * tau) ** 4 / (12.0 * q ** 2 * phi ** 2 * exposure_s ** 2)
+        bias = p.dcr_median_cps / q_phi + ap / (1.0 - ap) * np.exp(-q_phi * tau)
+        shot = (1.0 + q_phi * tau) / (q_phi * exposure_s)
+        quant = (1.0 + q_phi * tau) ** 4 / (12.0 * q_phi ** 2 * exposure_s ** 2)
     return -_db(bias ** 2 + shot + quant)
 
 
@@ -110,8 +110,7 @@ def snr_spad_gated_db(flux_ph_s_m2, params: SpadParams | None = None, exposure_s
     """
     p = params or sensor_params("spad")
     n = exposure_s / p.bin_s
-    q = p.qe * p.fill_factor
-    rate = q * pixel_flux(flux_ph_s_m2, p.pixel_pitch_m)
+    rate = _detections_per_s(flux_ph_s_m2, p)
     if gate_s == "auto":
         with np.errstate(divide="ignore"):
             gate = np.clip(OPTIMAL_GATED_X / rate, p.min_gate_s, p.bin_s)
@@ -127,8 +126,6 @@ def snr_spad_gated_db(flux_ph_s_m2, params: SpadParams | None = None, exposure_s
 
 def reference_flux_1lx() -> float:
     """Sensor-plane photon irradiance of a middle-grey scene at 1 lx (DESIGN §3 defaults), ph s⁻¹ m⁻²."""
-    from simspad.physics.radiometry import flux_scale
-
     return float(flux_scale(1.0, 1.0))
 
 
@@ -136,8 +133,7 @@ def snr_events_db(flux_ph_s_m2, contrast: float, params: EventParams | None = No
                   window_s: float = DEFAULT_EXPOSURE_S, flux_1lx: float | None = None):
     """SNR (dB) of the event camera for a step of relative contrast ``contrast`` (ΔΦ/Φ) within ``window_s``."""
     p = params or sensor_params("events")
-    eta = p.qe * p.fill_factor
-    lam = eta * pixel_flux(flux_ph_s_m2, p.pixel_pitch_m) + p.dark_current_e_s
+    lam = _detections_per_s(flux_ph_s_m2, p) + p.dark_current_e_s
     f_c = cutoff_hz(lam, p.photoreceptor_cutoff_hz_max, p.photoreceptor_cutoff_ref_rate_e_s)
     var_log = np.pi * f_c / lam
     delta = math.log1p(contrast) * (1.0 - np.exp(-2 * np.pi * f_c * window_s))
@@ -145,7 +141,7 @@ def snr_events_db(flux_ph_s_m2, contrast: float, params: EventParams | None = No
     p_e = ndtr((delta - threshold) / np.sqrt(p.threshold_sigma ** 2 + 2 * var_log))
     signal = p_e * delta / threshold
     flux_1lx = reference_flux_1lx() if flux_1lx is None else flux_1lx
-    lam_1lx = eta * pixel_flux(flux_1lx, p.pixel_pitch_m) + p.dark_current_e_s
+    lam_1lx = _detections_per_s(flux_1lx, p) + p.dark_current_e_s
     noise = window_s * (p.shot_noise_rate_hz_at_1lux * np.sqrt(lam_1lx / lam) + p.leak_rate_hz)
     return _db(signal / noise)
 

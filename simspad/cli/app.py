@@ -75,7 +75,7 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True, help="Recording (.h5).")
 def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out_path):
     """Simulate the sensors on a render directory at one lux level and write a recording."""
-    from simspad.sensors.simulate import simulate_from_cli
+    from simspad.cli.simulate import simulate_from_cli
 
     path = simulate_from_cli(render_dir, lux=lux, sensors=sensors, start_s=start_s, duration_s=duration_s,
                              seed=seed, overrides=overrides, out_path=out_path)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simspad.physics import spad_statistics as _stats
+from simspad.physics.radiometry import detection_area_m2
 from simspad.physics.spad_statistics import detection_probability  # noqa: F401  (re-exported)
 
 # A log estimate from fewer than this many expected detections/electrons is treated as this many: it keeps
@@ -53,7 +54,7 @@ class SpadResponse:
 
         a = rec.spad_attrs
         try:
-            q = float(a["qe"]) * float(a["fill_factor"]) * float(a["pixel_pitch_m"]) ** 2
+            q = detection_area_m2(float(a["pixel_pitch_m"]), float(a["fill_factor"]), float(a["qe"]))
             bin_s = float(a["bin_s"])
             gate_s = float(a.get("gate_s", bin_s))
         except (KeyError, TypeError, ValueError) as exc:
@@ -102,7 +103,7 @@ class FrameResponse:
         try:
             return cls(float(a["gain_dn_per_e"]), float(a["black_level_dn"]), float(a["read_noise_e"]),
                        float(a["full_well_e"]), int(a["bit_depth"]),
-                       float(a["qe"]) * float(a.get("fill_factor", 1.0)) * float(a["pixel_pitch_m"]) ** 2)
+                       detection_area_m2(float(a["pixel_pitch_m"]), float(a.get("fill_factor", 1.0)), float(a["qe"])))
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"frame attrs incomplete or not numeric ({exc})", path=rec.path,
                              field="/frames attrs")

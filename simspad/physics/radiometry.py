@@ -5,7 +5,7 @@ Chain, for a scene lit by illuminance E (lux) and rendered in relative units Y_r
 1. scene luminance  L = Y_rel · ρ̄·E / (π · mean(Y_rel))           cd m⁻²   (mean luminance = ρ̄E/π, ρ̄ = 0.18)
 2. sensor-plane illuminance  E_img = π · L · T_lens / (4 N²)          lx       (camera equation)
 3. photon irradiance  Φ = E_img · photons_per_lux(illuminant)         photons s⁻¹ m⁻²
-4. per-pixel detection rate  λ = Φ · pitch² · fill_factor · qe        photons s⁻¹
+4. per-pixel detection rate  λ = Φ · q,  q = pitch² · fill_factor · qe      photons s⁻¹  (q: detection area, m²)
 
 The photons-per-lux factor integrates the illuminant's spectral distribution over the visible band with
 colour-science: ∫S(λ)·λ/(hc) dλ ÷ (K_m·∫V(λ)S(λ) dλ).
@@ -173,8 +173,50 @@ def flux_scale(mean_relative_luminance: float, lux: float, optics: Optics | None
             * photons_per_lux(optics.illuminant))
 
 
+def sensitive_area_m2(pixel_pitch_m: float, fill_factor: float) -> float:
+    """Light-sensitive area of one pixel, ``pitch² · fill_factor`` (m²).
+
+    Parameters
+    ----------
+    pixel_pitch_m : float
+        Pixel pitch, m.
+    fill_factor : float
+        Fraction of the pixel area that is sensitive, in (0, 1].
+
+    Returns
+    -------
+    float
+        m²: photons per pixel per photon m⁻² of fluence (before quantum efficiency).
+    """
+    return pixel_pitch_m**2 * fill_factor
+
+
+def detection_area_m2(pixel_pitch_m: float, fill_factor: float, qe: float) -> float:
+    """Detection area of one pixel, ``q = pitch² · fill_factor · qe`` (m²).
+
+    The one home of this product: the simulators, the fusion methods and the analyses all call it, so the area a
+    method inverts is bit-for-bit the area the simulator used (it is also recorded as the SPAD's
+    ``detection_area_m2`` attribute). Evaluated left to right, ``(pitch² · fill_factor) · qe``.
+
+    Parameters
+    ----------
+    pixel_pitch_m : float
+        Pixel pitch, m.
+    fill_factor : float
+        Fraction of the pixel area that is sensitive, in (0, 1].
+    qe : float
+        Quantum efficiency (photon detection probability), spectrally weighted, in (0, 1].
+
+    Returns
+    -------
+    float
+        m²: detections s⁻¹ per photon s⁻¹ m⁻² (``q·Φ`` is the pixel's detection rate).
+    """
+    return sensitive_area_m2(pixel_pitch_m, fill_factor) * qe
+
+
 def detection_rate(flux_ph_s_m2, pixel_pitch_m: float, fill_factor: float, qe: float):
-    """Detected photons per second per pixel: λ = Φ · pitch² · fill_factor · qe.
+    """Detected photons per second per pixel: λ = Φ · pitch² · fill_factor · qe (see :func:`detection_area_m2`).
 
     Parameters
     ----------
@@ -185,7 +227,7 @@ def detection_rate(flux_ph_s_m2, pixel_pitch_m: float, fill_factor: float, qe: f
     fill_factor, qe : float
         Fraction of the pixel that is sensitive and its (spectrally weighted) quantum efficiency.
     """
-    return np.asarray(flux_ph_s_m2) * (pixel_pitch_m**2 * fill_factor * qe)
+    return np.asarray(flux_ph_s_m2) * detection_area_m2(pixel_pitch_m, fill_factor, qe)
 
 
 def _check_positive(value: float, name: str) -> None:

@@ -15,12 +15,22 @@ from dataclasses import dataclass, field
 from typing import Literal, Union
 
 from simspad.io.recording import SENSOR_KINDS
+from simspad.physics.radiometry import detection_area_m2
 
 Auto = Literal["auto"]
 
 
+class _PixelArea:
+    """The detection area of a preset's pixel, from its ``pixel_pitch_m``, ``fill_factor`` and ``qe`` fields."""
+
+    @property
+    def detection_area_m2(self) -> float:
+        """``q = pixel_pitch_m²·fill_factor·qe`` (m²): detections s⁻¹ per photon s⁻¹ m⁻² (radiometry)."""
+        return detection_area_m2(float(self.pixel_pitch_m), float(self.fill_factor), float(self.qe))
+
+
 @dataclass(frozen=True)
-class SpadParams:
+class SpadParams(_PixelArea):
     """SwissSPAD2-class gated binary SPAD array."""
 
     kind: typing.ClassVar[str] = "spad"
@@ -51,7 +61,7 @@ class SpadParams:
 
 
 @dataclass(frozen=True)
-class FrameParams:
+class FrameParams(_PixelArea):
     """Blackfly S (Sony IMX273) conventional global-shutter camera, EMVA 1288 model."""
 
     kind: typing.ClassVar[str] = "frames"
@@ -84,7 +94,7 @@ class FrameParams:
 
 
 @dataclass(frozen=True)
-class EventParams:
+class EventParams(_PixelArea):
     """Prophesee Gen4 (Sony IMX636) event camera."""
 
     kind: typing.ClassVar[str] = "events"
@@ -119,7 +129,6 @@ class EventParams:
     substep_tolerance: float = 0.01
     """Internal time step accuracy: within a step the photoreceptor output is interpolated linearly, within this
     fraction of the pixel's smaller threshold of its exact path (sets crossing-time accuracy)."""
-
 
 
 PRESETS: dict[str, dict[str, object]] = {

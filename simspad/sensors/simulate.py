@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +22,9 @@ from simspad.io.recording import RecordingWriter
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_rng
 from simspad.radiance.timeline import Timeline
+from simspad.sensors import events, frames, spad
 from simspad.sensors.ground_truth import write_ground_truth
-from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs, sensor_params
+from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs
 
 #: Instants this close beyond the render's last keyframe are accepted (round-off of start + duration).
 _TIME_TOLERANCE_S = 1e-9
@@ -74,10 +73,6 @@ def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start
     SimSpadError
         Bad lux, interval, sensor kind or parameter; InputError for a malformed render directory.
     """
-    from simspad.sensors.events import simulate_events
-    from simspad.sensors.frame import simulate_frames
-    from simspad.sensors.spad import simulate_spad
-
     if not (isinstance(lux, (int, float)) and math.isfinite(lux) and lux > 0):
         raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="lux")
     for kind in sensors:
@@ -90,9 +85,9 @@ def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start
     _validate_sensors(sensors, tl.height)
     t0, t1 = _interval(tl, start_s, duration_s, render_dir)
     flux_tl = tl.photon_flux(lux, optics)
-    runners = {"spad": lambda w, p, rng: simulate_spad(w, flux_tl, t0, t1, p, rng, progress),
-               "frames": lambda w, p, rng: simulate_frames(w, flux_tl, t0, t1, p, rng, progress),
-               "events": lambda w, p, rng: simulate_events(w, flux_tl, t0, t1, p, rng, lux, progress)}
+    runners = {"spad": lambda w, p, rng: spad.simulate_spad(w, flux_tl, t0, t1, p, rng, progress),
+               "frames": lambda w, p, rng: frames.simulate_frames(w, flux_tl, t0, t1, p, rng, progress),
+               "events": lambda w, p, rng: events.simulate_events(w, flux_tl, t0, t1, p, rng, lux, progress)}
     attrs = _root_attrs(tl, render_dir, lux=lux, sensors=sensors, t0=t0, t1=t1, seed=seed, stream_key=stream_key,
                         gt_rate_hz=gt_rate_hz, optics=optics, flux_scale=flux_tl.scale, metadata=metadata)
     common = {"lux": float(lux), "flux_scale": float(flux_tl.scale),
@@ -109,12 +104,10 @@ def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start
 
 def _validate_sensors(sensors: dict, height: int) -> None:
     """Check every sensor's parameters before anything is written (fail fast, one message naming the field)."""
-    from simspad.sensors import events, frame, spad
-
     if "spad" in sensors:
         spad.validate_params(sensors["spad"])
     if "frames" in sensors:
-        frame.validate_params(sensors["frames"], height)
+        frames.validate_params(sensors["frames"], height)
     if "events" in sensors:
         events.validate_params(sensors["events"])
 
@@ -181,75 +174,3 @@ def _seed_value(seed):
         return str(seed.entropy) if seed.spawn_key == () else f"{seed.entropy}/{list(seed.spawn_key)}"
     seed = int(seed)
     return seed if -(2**63) <= seed < 2**63 else str(seed)
-
-
-# ---------------------------------------------------------------------------------------------------- CLI
-def parse_value(text: str):
-    """A ``--set`` value: ``auto``, ``true``/``false``, an integer, a float, or the text itself."""
-    low = text.strip().lower()
-    if low == "auto":
-        return "auto"
-    if low in ("true", "yes", "on"):
-        return True
-    if low in ("false", "no", "off"):
-        return False
-    try:
-        return int(low)
-    except ValueError:
-        pass
-    try:
-        return float(low)
-    except ValueError:
-        return text.strip()
-
-
-def parse_sensor_list(text: str) -> list[str]:
-    """``"spad,frames"`` → ``["spad", "frames"]``; SimSpadError naming ``--sensors`` on unknown or empty."""
-    kinds = []
-    for part in (text or "").split(","):
-        part = part.strip()
-        if not part:
-            continue
-        if part not in SENSOR_KINDS:
-            raise SimSpadError(f"unknown sensor {part!r} (expected one of {', '.join(SENSOR_KINDS)})",
-                               field="--sensors")
-        if part not in kinds:
-            kinds.append(part)
-    if not kinds:
-        raise SimSpadError(f"no sensor given (expected some of {', '.join(SENSOR_KINDS)})", field="--sensors")
-    return kinds
-
-
-def parse_overrides(items, kinds: list[str]) -> dict[str, dict]:
-    """``["spad.gate_s=1e-6", ...]`` → ``{"spad": {"gate_s": 1e-6}}``; SimSpadError naming ``--set``."""
-    out: dict[str, dict] = {k: {} for k in kinds}
-    for item in items or ():
-        key, sep, value = item.partition("=")
-        kind, dot, name = key.strip().partition(".")
-        if not sep or not dot or not name:
-            raise SimSpadError(f"expected SENSOR.FIELD=VALUE, got {item!r}", field="--set")
-        if kind not in SENSOR_KINDS:
-            raise SimSpadError(f"unknown sensor {kind!r} in {item!r} (expected one of {', '.join(SENSOR_KINDS)})",
-                               field="--set")
-        if kind not in kinds:
-            raise SimSpadError(f"{item!r} sets a parameter of {kind!r}, which is not in --sensors "
-                               f"({','.join(kinds)})", field="--set")
-        out[kind][name.strip()] = parse_value(value)
-    return out
-
-
-def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | None, duration_s: float | None,
-                      seed: int, overrides, out_path) -> Path:
-    """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`."""
-    if lux is None or not math.isfinite(lux) or lux <= 0:
-        raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="--lux")
-    kinds = parse_sensor_list(sensors)
-    per_kind = parse_overrides(overrides, kinds)
-    params = {}
-    for kind in kinds:
-        try:
-            params[kind] = sensor_params(kind, None, per_kind[kind])
-        except ValueError as exc:
-            raise SimSpadError(str(exc), field=f"--set {kind}") from None
-    return simulate_recording(render_dir, out_path, lux=lux, sensors=params, start_s=start_s,
-                              duration_s=duration_s, seed=seed, progress=sys.stderr.isatty())

@@ -15,7 +15,8 @@ from simspad.io.render_dir import write_render_dir
 from simspad.physics.radiometry import Optics, flux_scale
 from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import sensor_params
-from simspad.sensors.simulate import parse_overrides, parse_value, simulate_recording
+from simspad.cli.simulate import parse_overrides, parse_value
+from simspad.sensors.simulate import simulate_recording
 
 H, W = 12, 20
 TIMES = np.array([0.0, 0.0013, 0.0029, 0.004])

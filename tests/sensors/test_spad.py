@@ -26,7 +26,6 @@ from simspad.sensors.spad import (
     SpadChunker,
     auto_gate,
     dcr_map,
-    detection_area_m2,
     n_bins,
     pack_bits,
     resolve_gate,
@@ -137,7 +136,7 @@ def test_flat_field_bit_rate_matches_binomial(lux):
     """Per-pixel counts ~ Binomial(n, 1 − exp(−(λ + r_dark)·gate)) with the real DCR map, fixed gate."""
     flux = flux_scale(1.0, lux)  # flat relative luminance 1 = the mean: the whole frame is mid-grey
     base = SpadParams(**QUIET)
-    q = detection_area_m2(base)
+    q = base.detection_area_m2
     rate = flux * q
     # the full bin where it does not saturate, else a fixed gate giving p ≈ 0.5 (the sensor's own floor)
     gate = BIN_S if rate * BIN_S < 2.0 else max(math.log(2) / rate, base.min_gate_s)
@@ -172,7 +171,7 @@ def test_auto_gate_flat_field(tmp_path, lux):
         n = rec.spad_n_bins
         counts = rec.spad_counts(0, n)
         assert n == n_bins(0.03, BIN_S, gate) and np.allclose(rec.spad_t_start, np.arange(n) * BIN_S)
-    rate = flux * detection_area_m2(p) + dcr
+    rate = flux * p.detection_area_m2 + dcr
     assert attrs["gate_auto"] and gate == attrs["gate_s"]
     assert np.isclose(gate, auto_gate(rate, BIN_S, p.min_gate_s, 0.9))
     expected = -np.expm1(-rate * gate)
@@ -200,7 +199,7 @@ def test_time_varying_ramp_integrates_exactly(peak_lambda, shape):
     gate, n = 6e-6, 2500
     knots_t = np.arange(0, n * BIN_S + 20e-6, 7.3e-6)
     p = SpadParams(gate_s=gate, **QUIET)
-    q = detection_area_m2(p)
+    q = p.detection_area_m2
     peak = peak_lambda / (q * gate)
     knots_y = np.where(np.arange(knots_t.size) % 2 == 0, 0.05, 1.0) * peak * np.linspace(0.3, 1.0, knots_t.size)
     frames = np.broadcast_to(knots_y[:, None, None], (knots_t.size, *shape)).astype(np.float32)
@@ -253,7 +252,7 @@ def test_afterpulsing_conditional_rate(p_primary, chunk):
     """
     a = 0.05
     p = SpadParams(gate_s=BIN_S, afterpulsing_probability=a, crosstalk_probability=0.0)
-    flux = -math.log1p(-p_primary) / (detection_area_m2(p) * BIN_S)
+    flux = -math.log1p(-p_primary) / (p.detection_area_m2 * BIN_S)
     b = _bits(p, flux, 4000 if chunk > 10 else 1200, chunk=chunk)
     prev, nxt = b[:-1].ravel(), b[1:].ravel()
     n1, n0 = prev.sum(), prev.size - prev.sum()
@@ -285,7 +284,7 @@ def test_crosstalk_joint_law_of_neighbours(p_primary):
     """The 2×2 table of (left, right) bits of interior neighbours matches the exact law (χ², 3 dof)."""
     c = 0.03
     p = SpadParams(gate_s=BIN_S, afterpulsing_probability=0.0, crosstalk_probability=c)
-    flux = -math.log1p(-p_primary) / (detection_area_m2(p) * BIN_S)
+    flux = -math.log1p(-p_primary) / (p.detection_area_m2 * BIN_S)
     b = _bits(p, flux, 3000, seed=2)
     left, right = b[:, 1:-1, 1:-2].ravel(), b[:, 1:-1, 2:-1].ravel()
     observed = np.bincount(left * 2 + right, minlength=4).reshape(2, 2)
@@ -308,7 +307,7 @@ def test_crosstalk_joint_law_of_neighbours(p_primary):
 def test_ml_estimator_recovers_flux_within_predicted_std(x):
     """z = (ln Φ̂ − ln Φ)/sd has mean 0 and variance 1, sd from the DESIGN §4 formula (dark rate included)."""
     p = SpadParams(gate_s=1e-6, **QUIET)
-    q = detection_area_m2(p)
+    q = p.detection_area_m2
     flux = x / (q * p.gate_s)
     rng = np.random.default_rng(int(x * 100))
     dcr = dcr_map((H, W), p, rng)

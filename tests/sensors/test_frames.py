@@ -9,7 +9,7 @@ from simspad.analysis import emva
 from simspad.errors import SimSpadError
 from simspad.io.recording import RecordingWriter, open_recording
 from simspad.radiance.timeline import Timeline
-from simspad.sensors import frame
+from simspad.sensors import frames
 from simspad.sensors.presets import FrameParams, sensor_params
 
 SHAPE = (96, 96)
@@ -18,13 +18,13 @@ SHAPE = (96, 96)
 def _ptc_measurement(params, seed=1, n_levels=60, n_bright=4, n_dark=100, exposure_s=1e-3):
     """Flat fields at fixed exposure and increasing irradiance, denser near saturation (EMVA 1288 practice)."""
     rng = np.random.default_rng(seed)
-    pattern = frame.draw_fixed_pattern(params, SHAPE, rng)
+    pattern = frames.draw_fixed_pattern(params, SHAPE, rng)
     full_p = params.full_well_e / params.qe
     mu_p = np.concatenate([np.linspace(0.0, 0.9 * full_p, n_levels // 2, endpoint=False),
                            np.linspace(0.9 * full_p, 1.15 * full_p, n_levels - n_levels // 2)])
-    bright = [np.stack([frame.expose(np.full(SHAPE, m), exposure_s, pattern, params, rng) for _ in range(n_bright)])
+    bright = [np.stack([frames.expose(np.full(SHAPE, m), exposure_s, pattern, params, rng) for _ in range(n_bright)])
               for m in mu_p]
-    dark = np.stack([frame.expose(np.zeros(SHAPE), exposure_s, pattern, params, rng) for _ in range(n_dark)])
+    dark = np.stack([frames.expose(np.zeros(SHAPE), exposure_s, pattern, params, rng) for _ in range(n_dark)])
     return emva.photon_transfer(bright, dark, mu_p)
 
 
@@ -53,8 +53,8 @@ def test_photon_transfer_detects_a_wrong_gain():
 
 
 def _flat_timeline(flux, times=(0.0, 0.1), shape=(24, 32)):
-    frames = np.full((len(times), *shape), flux, np.float32)
-    return Timeline.from_arrays(np.asarray(times), frames)
+    keyframes = np.full((len(times), *shape), flux, np.float32)
+    return Timeline.from_arrays(np.asarray(times), keyframes)
 
 
 def test_simulate_frames_flat_field_statistics_and_attrs(tmp_path):
@@ -62,7 +62,7 @@ def test_simulate_frames_flat_field_statistics_and_attrs(tmp_path):
     flux = 3e17  # photons s⁻¹ m⁻²: 2.3e6 e⁻/s, so auto exposure (3.6 ms) is set by the full well
     tl = _flat_timeline(flux)
     with RecordingWriter(tmp_path / "r.h5", {"width": 32, "height": 24, "duration_s": 0.1, "lux": 1.0}) as w:
-        attrs = frame.simulate_frames(w, tl, 0.0, 0.1, params, np.random.default_rng(5))
+        attrs = frames.simulate_frames(w, tl, 0.0, 0.1, params, np.random.default_rng(5))
     rate_e = params.qe * flux * params.pixel_pitch_m ** 2 * params.fill_factor + params.dark_current_e_s
     expected_exposure = min(params.max_exposure_s, 1 / params.frame_rate_hz,
                             params.auto_max_fill * params.full_well_e / rate_e)
@@ -90,11 +90,11 @@ def test_simulate_frames_flat_field_statistics_and_attrs(tmp_path):
 def test_window_fluence_is_exact_for_motion_and_rolling_shutter():
     rng = np.random.default_rng(0)
     times = np.array([0.0, 0.003, 0.004, 0.01])
-    frames = rng.uniform(0, 1e15, (4, 8, 5)).astype(np.float32)
-    tl = Timeline.from_arrays(times, frames)
+    keyframes = rng.uniform(0, 1e15, (4, 8, 5)).astype(np.float32)
+    tl = Timeline.from_arrays(times, keyframes)
     line_s = 4e-4
     starts = 0.001 + np.arange(8) * line_s
-    got = frame.window_fluence(tl, starts, 0.005)
+    got = frames.window_fluence(tl, starts, 0.005)
     fine = np.linspace(0, 1, 20001)
     for r in (0, 3, 7):
         ts = starts[r] + 0.005 * fine
@@ -103,7 +103,7 @@ def test_window_fluence_is_exact_for_motion_and_rolling_shutter():
         np.testing.assert_allclose(got[r], ref, rtol=2e-4)
     # a rolling shutter sees later instants in lower rows: on a brightening flat field lower rows collect more
     ramp = Timeline.from_arrays([0.0, 0.02], np.stack([np.full((8, 5), 1e15), np.full((8, 5), 3e15)]).astype(np.float32))
-    f = frame.window_fluence(ramp, 0.001 + np.arange(8) * line_s, 0.004)
+    f = frames.window_fluence(ramp, 0.001 + np.arange(8) * line_s, 0.004)
     expected = (1e15 + 2e15 * (0.001 + np.arange(8) * line_s + 0.002) / 0.02) * 0.004
     np.testing.assert_allclose(f[:, 0], expected, rtol=1e-6)
 
@@ -114,7 +114,7 @@ def test_rolling_shutter_recording_skews_rows_and_fits_the_readout(tmp_path):
     ramp = Timeline.from_arrays([0.0, 0.1], np.stack([np.full((H, W), 1e16), np.full((H, W), 1e17)]).astype(np.float32))
     params = FrameParams(exposure_s=8e-3, frame_rate_hz=100.0, rolling_shutter_line_s=line_s)
     with RecordingWriter(tmp_path / "rs.h5", {"width": W, "height": H, "duration_s": 0.1, "lux": 1.0}) as w:
-        attrs = frame.simulate_frames(w, ramp, 0.0, 0.1, params, np.random.default_rng(2))
+        attrs = frames.simulate_frames(w, ramp, 0.0, 0.1, params, np.random.default_rng(2))
     with open_recording(tmp_path / "rs.h5") as rec:
         dn = rec.frames_dn().astype(np.float64)
         t_start = rec.frames_t_start
@@ -136,10 +136,10 @@ def test_bayer_mosaic_follows_the_colour_of_the_scene(tmp_path):
     tl = Timeline.from_arrays([0.0, 0.05], red)
     params = FrameParams(rgb=True, exposure_s=2e-3, frame_rate_hz=100.0)
     with RecordingWriter(tmp_path / "c.h5", {"width": 8, "height": 6, "duration_s": 0.05, "lux": 1.0}) as w:
-        attrs = frame.simulate_frames(w, tl, 0.0, 0.05, params, np.random.default_rng(1))
+        attrs = frames.simulate_frames(w, tl, 0.0, 0.05, params, np.random.default_rng(1))
     with open_recording(tmp_path / "c.h5") as rec:
         dn = rec.frames_dn().astype(np.float64).mean(axis=0)
-    channel = frame.bayer_channel_map(6, 8)
+    channel = frames.bayer_channel_map(6, 8)
     assert attrs["bayer_pattern"] == "RGGB" and attrs["rgb_source"] == "rgb"
     assert dn[channel == 0].mean() > params.black_level_dn + 100
     assert abs(dn[channel != 0].mean() - params.black_level_dn) < 2
@@ -150,16 +150,16 @@ def test_bad_exposure_is_refused_with_the_field_named(tmp_path):
     params = FrameParams(exposure_s=0.02, frame_rate_hz=100.0)
     with pytest.raises(SimSpadError, match="exposure_s"):
         with RecordingWriter(tmp_path / "x.h5", {"width": 32, "height": 24, "duration_s": 0.1, "lux": 1}) as w:
-            frame.simulate_frames(w, tl, 0.0, 0.1, params, np.random.default_rng(0))
+            frames.simulate_frames(w, tl, 0.0, 0.1, params, np.random.default_rng(0))
     assert not (tmp_path / "x.h5").exists()
 
 
 def test_saturation_clips_at_full_well_and_adc():
     params = FrameParams()
     rng = np.random.default_rng(3)
-    pattern = frame.draw_fixed_pattern(params, (32, 32), rng)
-    dn = frame.expose(np.full((32, 32), 1e6), 1e-3, pattern, params, rng)
+    pattern = frames.draw_fixed_pattern(params, (32, 32), rng)
+    dn = frames.expose(np.full((32, 32), 1e6), 1e-3, pattern, params, rng)
     assert dn.dtype == np.uint16
-    assert dn.max() <= frame.dn_max(params)
-    assert dn.min() >= min(frame.dn_max(params),
+    assert dn.max() <= frames.dn_max(params)
+    assert dn.min() >= min(frames.dn_max(params),
                            params.gain_dn_per_e * params.full_well_e + params.black_level_dn - 10)

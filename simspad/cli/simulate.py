@@ -1,0 +1,87 @@
+"""``simspad simulate``: parse ``--sensors`` and ``--set`` overrides, then simulate one recording.
+
+The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); the preset dataclasses of
+:mod:`simspad.sensors.presets` check them. The simulation itself is
+:func:`simspad.sensors.simulate.simulate_recording`.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from simspad.errors import SimSpadError
+from simspad.sensors.presets import SENSOR_KINDS, sensor_params
+from simspad.sensors.simulate import simulate_recording
+
+
+def parse_value(text: str):
+    """A ``--set`` value: ``auto``, ``true``/``false``, an integer, a float, or the text itself."""
+    low = text.strip().lower()
+    if low == "auto":
+        return "auto"
+    if low in ("true", "yes", "on"):
+        return True
+    if low in ("false", "no", "off"):
+        return False
+    try:
+        return int(low)
+    except ValueError:
+        pass
+    try:
+        return float(low)
+    except ValueError:
+        return text.strip()
+
+
+def parse_sensor_list(text: str) -> list[str]:
+    """``"spad,frames"`` → ``["spad", "frames"]``; SimSpadError naming ``--sensors`` on unknown or empty."""
+    kinds = []
+    for part in (text or "").split(","):
+        part = part.strip()
+        if not part:
+            continue
+        if part not in SENSOR_KINDS:
+            raise SimSpadError(f"unknown sensor {part!r} (expected one of {', '.join(SENSOR_KINDS)})",
+                               field="--sensors")
+        if part not in kinds:
+            kinds.append(part)
+    if not kinds:
+        raise SimSpadError(f"no sensor given (expected some of {', '.join(SENSOR_KINDS)})", field="--sensors")
+    return kinds
+
+
+def parse_overrides(items, kinds: list[str]) -> dict[str, dict]:
+    """``["spad.gate_s=1e-6", ...]`` → ``{"spad": {"gate_s": 1e-6}}``; SimSpadError naming ``--set``."""
+    out: dict[str, dict] = {k: {} for k in kinds}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        kind, dot, name = key.strip().partition(".")
+        if not sep or not dot or not name:
+            raise SimSpadError(f"expected SENSOR.FIELD=VALUE, got {item!r}", field="--set")
+        if kind not in SENSOR_KINDS:
+            raise SimSpadError(f"unknown sensor {kind!r} in {item!r} (expected one of {', '.join(SENSOR_KINDS)})",
+                               field="--set")
+        if kind not in kinds:
+            raise SimSpadError(f"{item!r} sets a parameter of {kind!r}, which is not in --sensors "
+                               f"({','.join(kinds)})", field="--set")
+        out[kind][name.strip()] = parse_value(value)
+    return out
+
+
+def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | None, duration_s: float | None,
+                      seed: int, overrides, out_path) -> Path:
+    """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`."""
+    if lux is None or not math.isfinite(lux) or lux <= 0:
+        raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="--lux")
+    kinds = parse_sensor_list(sensors)
+    per_kind = parse_overrides(overrides, kinds)
+    params = {}
+    for kind in kinds:
+        try:
+            params[kind] = sensor_params(kind, None, per_kind[kind])
+        except ValueError as exc:
+            raise SimSpadError(str(exc), field=f"--set {kind}") from None
+    return simulate_recording(render_dir, out_path, lux=lux, sensors=params, start_s=start_s,
+                              duration_s=duration_s, seed=seed, progress=sys.stderr.isatty())

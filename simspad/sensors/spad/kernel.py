@@ -1,0 +1,317 @@
+"""SPAD sampling kernel (numba): the primary bits of a chunk of bins and their secondary detections.
+
+Efficiency
+----------
+Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
+are simulated per output byte (8 pixels) by whichever sampler is cheaper (both are exact):
+
+- *sparse* (byte's largest probability bound below :data:`SPARSE_MAX_PROBABILITY`): for each pixel, with
+  ``Λ_max`` the largest Λ over the chunk (the flux is piecewise linear, so its maximum sits on a keyframe),
+  draw geometric skips between candidate bins (``⌊E/Λ_max⌋`` with E exponential: one draw per candidate) and
+  keep a candidate with probability ``p_k/p_max`` (thinning, with a squeeze on the lower bound). Work is
+  proportional to detections, so dark scenes cost almost nothing;
+- *dense*: bin by bin, one uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
+  multiplication per bin inside a linear piece (Λ is affine in k there); the byte is assembled in a register.
+
+The random stream is a SplitMix64 generator (:mod:`simspad.physics.rng`) inside the numba kernel, seeded per
+kernel call from the caller's ``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for
+the same seed and chunking (the chunk size is a function of the frame size only).
+
+The model (Λ_k, secondary effects) is described in :mod:`simspad.sensors.spad.model`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from simspad.physics.rng import geometric, next_u64, uniform
+
+#: Per-pixel choice between the sparse (skip) and dense (uniform per bin) samplers: sparse below this p_max.
+SPARSE_MAX_PROBABILITY = 0.08
+# The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
+_S32 = np.uint64(32)
+_M32 = np.uint64(0xFFFFFFFF)
+_INV32 = 1.0 / 4294967296.0
+_POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
+#: Dense bytes run through all bins of a chunk in blocks of this many, so their state stays in L1 cache.
+_DENSE_BLOCK = 128
+#: Initial capacity of the secondary-detection buffer (it doubles when full).
+_EVENTS_CAPACITY = 1024
+
+
+class ChunkLayout(NamedTuple):
+    """Time structure of one kernel call: bins grouped in runs over which the gate-mean flux is affine.
+
+    Bin k belongs to run ``r = bin_run[k]``; its gate-mean flux is ``A_r + (B_r − A_r)·bin_w[k]`` with
+    ``A_r = images[run_ia[r]]`` and ``B_r = images[run_ib[r]]``; w advances by ``run_dw[r]`` per bin.
+    """
+
+    images: np.ndarray
+    """[I, H, W] float32: sensor-plane photon irradiance, photons s⁻¹ m⁻²; they bound every gate mean."""
+    run_ia: np.ndarray
+    """[R] int64: index in ``images`` of each run's start image A_r."""
+    run_ib: np.ndarray
+    """[R] int64: index in ``images`` of each run's end image B_r."""
+    run_dw: np.ndarray
+    """[R] float64: increase of the weight w per bin inside each run."""
+    bin_run: np.ndarray
+    """[m] int64: run of each bin."""
+    bin_w: np.ndarray
+    """[m] float64: weight of B_r in each bin's gate mean."""
+
+
+class PixelResponse(NamedTuple):
+    """Per-pixel response of the sensor for one kernel call (named fields: no two floats can swap places)."""
+
+    dcr_cps: np.ndarray
+    """[H, W] float32: dark count rate, counts s⁻¹."""
+    q_gate_m2_s: float
+    """Detection area × gate, m² s: Λ per unit photon irradiance."""
+    gate_s: float
+    """Gate, s."""
+    sparse_max_probability: float
+    """Bytes whose largest detection probability bound is below this use the sparse sampler."""
+    log1m_afterpulse: float
+    """ln(1 − afterpulsing probability); 0 when the effect is off."""
+    log1m_crosstalk: float
+    """ln(1 − crosstalk probability) per neighbour; 0 when the effect is off."""
+
+
+@numba.njit(inline="always")
+def _push(events, n_events, k, y, x):
+    if n_events == events.shape[0]:
+        grown = np.empty((2 * events.shape[0], 3), np.int64)
+        grown[:n_events] = events[:n_events]
+        events = grown
+    events[n_events, 0] = k
+    events[n_events, 1] = y
+    events[n_events, 2] = x
+    return events, n_events + 1
+
+
+@numba.njit(inline="always")
+def _secondaries(state, pending, countdown, k, y, x, shape, response):
+    """Afterpulse and crosstalk trials of the primary detection at bin k, pixel (y, x).
+
+    ``pending`` is the secondary-detection buffer ``(events [n, 3] int64 (bin, row, col), n_events)``;
+    ``countdown`` holds ``(ap_left, ct_left)``: running geometric countdowns, the failures before the next
+    success of a stream of Bernoulli trials (1 afterpulse trial and 4 crosstalk trials per detection), so the
+    cost is a subtraction per detection, not 5 uniforms. Returns the updated ``(state, pending, countdown)``.
+    """
+    events, n_events = pending
+    ap_left, ct_left = countdown
+    H, W = shape
+    log1m_ap = response.log1m_afterpulse
+    log1m_ct = response.log1m_crosstalk
+    if log1m_ap < 0.0:
+        if ap_left == 0:
+            events, n_events = _push(events, n_events, k + 1, y, x)
+            state, ap_left = geometric(state, log1m_ap)
+        else:
+            ap_left -= 1
+    if log1m_ct < 0.0:
+        remaining = np.int64(4)
+        nb = np.int64(0)
+        while ct_left < remaining:
+            nb += ct_left
+            yy = y
+            xx = x
+            if nb == 0:
+                yy = y - 1
+            elif nb == 1:
+                yy = y + 1
+            elif nb == 2:
+                xx = x - 1
+            else:
+                xx = x + 1
+            if 0 <= yy < H and 0 <= xx < W:
+                events, n_events = _push(events, n_events, k, yy, xx)
+            remaining -= ct_left + 1
+            nb += 1
+            state, ct_left = geometric(state, log1m_ct)
+        ct_left -= remaining
+    return state, (events, n_events), (ap_left, ct_left)
+
+
+@numba.njit(inline="always")
+def _lam(layout, k, y, x, q_gate, dark):
+    """Λ of bin k at pixel (y, x): the gate's mean flux is affine in w within the bin's run."""
+    r = layout.bin_run[k]
+    a = float(layout.images[layout.run_ia[r], y, x])
+    lam = q_gate * (a + (float(layout.images[layout.run_ib[r], y, x]) - a) * layout.bin_w[k]) + dark
+    return lam if lam > 0.0 else 0.0
+
+
+# One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
+# countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
+@numba.njit(cache=True)
+def spad_chunk(out, layout, response, seed):
+    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [m, H, ceil(W/8)].
+
+    Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a gate that
+    straddles a keyframe is a run of its own with A = B = its exact mean), so the images bound every gate mean
+    of the call.
+
+    The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse pixels
+    one by one (geometric skips + thinning); dense bytes bin by bin, assembled in a register, with
+    z = exp(−Λ) advanced by one multiplication per bin inside a run.
+
+    Parameters
+    ----------
+    out : ndarray [m, H, ceil(W/8)] uint8
+        Packed bits, OR-ed into.
+    layout : ChunkLayout
+    response : PixelResponse
+    seed : int
+        Seed of this call's SplitMix64 stream.
+
+    Returns
+    -------
+    ndarray [n, 3] int64
+        Secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as (bin, row, col).
+    """
+    images = layout.images
+    dcr = response.dcr_cps
+    q_gate = response.q_gate_m2_s
+    gate_s = response.gate_s
+    log1m_ap = response.log1m_afterpulse
+    log1m_ct = response.log1m_crosstalk
+    m = out.shape[0]
+    H, W = images.shape[1], images.shape[2]
+    shape = (H, W)
+    Wb = (W + 7) // 8
+    state = np.uint64(seed)
+    ap_left = np.int64(1) << 62  # never reaches zero when the effect is off
+    ct_left = np.int64(1) << 62
+    if log1m_ap < 0.0:
+        state, ap_left = geometric(state, log1m_ap)
+    if log1m_ct < 0.0:
+        state, ct_left = geometric(state, log1m_ct)
+    countdown = (ap_left, ct_left)
+    pending = (np.empty((_EVENTS_CAPACITY, 3), np.int64), np.int64(0))
+    lam_dense = -math.log1p(-response.sparse_max_probability)
+    lam_hi = np.empty(8, np.float64)
+    lam_lo = np.empty(8, np.float64)
+    dense_y = np.empty(H * Wb, np.int64)
+    dense_b = np.empty(H * Wb, np.int64)
+    n_dense = 0
+    for y in range(H):
+        for xb in range(Wb):
+            x_end = min(8, W - 8 * xb)
+            hi_byte = 0.0
+            for bit in range(x_end):
+                x = 8 * xb + bit
+                hi = 0.0
+                lo = np.inf
+                for i in range(images.shape[0]):
+                    v = float(images[i, y, x])
+                    hi = max(hi, v)
+                    lo = min(lo, v)
+                dark = float(dcr[y, x]) * gate_s
+                lam_hi[bit] = q_gate * hi + dark
+                lam_lo[bit] = max(q_gate * lo + dark, 0.0)
+                hi_byte = max(hi_byte, lam_hi[bit])
+            if hi_byte >= lam_dense:
+                dense_y[n_dense] = y
+                dense_b[n_dense] = xb
+                n_dense += 1
+                continue
+            for bit in range(x_end):
+                lam_max = lam_hi[bit]
+                if lam_max <= 0.0:
+                    continue
+                x = 8 * xb + bit
+                dark = float(dcr[y, x]) * gate_s
+                varying = lam_lo[bit] < lam_max
+                p_max = -math.expm1(-lam_max) if varying else 1.0
+                p_min = -math.expm1(-lam_lo[bit]) if varying else 1.0
+                mask = np.uint8(1 << bit)
+                inv_lam = 1.0 / lam_max
+                k = np.int64(-1)
+                while True:
+                    state, u = uniform(state)
+                    skip = -math.log(1.0 - u) * inv_lam
+                    if skip >= m - 1 - k:
+                        break
+                    k += 1 + np.int64(skip)
+                    if varying:  # thinning: keep with p_k / p_max (squeeze on the lower bound first)
+                        state, u = uniform(state)
+                        up = u * p_max
+                        if up >= p_min:
+                            lam = _lam(layout, k, y, x, q_gate, dark)
+                            if up >= -math.expm1(-lam):
+                                continue
+                    out[k, y, xb] |= mask
+                    state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape, response)
+    # blocks of dense bytes run through all bins while their state stays in L1 cache
+    bin_run = layout.bin_run
+    z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
+    ratio = np.ones((_DENSE_BLOCK, 8), np.float64)
+    for b0 in range(0, n_dense, _DENSE_BLOCK):
+        b1 = min(b0 + _DENSE_BLOCK, n_dense)
+        for k in range(m):
+            r = bin_run[k]
+            if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
+                for i in range(b0, b1):
+                    y = dense_y[i]
+                    for bit in range(min(8, W - 8 * dense_b[i])):
+                        x = 8 * dense_b[i] + bit
+                        dark = float(dcr[y, x]) * gate_s
+                        z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, q_gate, dark))
+                        a = float(images[layout.run_ia[r], y, x])
+                        slope = q_gate * (float(images[layout.run_ib[r], y, x]) - a) * layout.run_dw[r]
+                        ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
+            for i in range(b0, b1):
+                ii = i - b0
+                value = np.int64(0)
+                for bit in range(0, 8, 2):
+                    # two 32-bit uniforms per draw: p ≥ SPARSE_MAX_PROBABILITY here, so 2⁻³² resolution is ample
+                    state, w = next_u64(state)
+                    u0 = float(w & _M32) * _INV32
+                    u1 = float(w >> _S32) * _INV32
+                    z0 = z[ii, bit]
+                    z1 = z[ii, bit + 1]
+                    z[ii, bit] = z0 * ratio[ii, bit]
+                    z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
+                    # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
+                    value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
+                out[k, dense_y[i], dense_b[i]] |= np.uint8(value)
+                count = np.int64(_POPCOUNT8[value])
+                ap_left, ct_left = countdown
+                if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
+                    for bit in range(8):
+                        if (value >> bit) & 1:
+                            state, pending, countdown = _secondaries(state, pending, countdown, k, dense_y[i],
+                                                                     8 * dense_b[i] + bit, shape, response)
+                else:
+                    countdown = (ap_left - count, ct_left - 4 * count)
+        z[:] = 1.0
+        ratio[:] = 1.0
+    events, n_events = pending
+    return events[:n_events]
+
+
+@numba.njit(cache=True)
+def apply_events(out, events, k_offset):
+    """OR secondary detections ``events`` [n, 3] (bin, row, col) into ``out``; return those past its last bin
+    (bins shifted by ``-k_offset``)."""
+    m = out.shape[0]
+    n_events = events.shape[0]
+    rest = np.empty((n_events, 3), np.int64)
+    n_rest = 0
+    for i in range(n_events):
+        k = events[i, 0]
+        y = events[i, 1]
+        x = events[i, 2]
+        if k < m:
+            out[k, y, x >> 3] |= np.uint8(1 << (x & 7))
+        else:
+            rest[n_rest, 0] = k - k_offset
+            rest[n_rest, 1] = y
+            rest[n_rest, 2] = x
+            n_rest += 1
+    return rest[:n_rest]
