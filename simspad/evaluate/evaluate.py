@@ -164,7 +164,7 @@ def is_siemens_star(scene: str) -> bool:
 def _gt_white_point(rec, idx: np.ndarray) -> float:
     def chunks():
         for i in range(0, idx.size, 16):
-            yield rec.gt_flux(idx[i:i + 16].tolist())
+            yield rec.gt.flux(idx[i:i + 16].tolist())
     return metrics.white_point(chunks)
 
 
@@ -195,7 +195,7 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
     Raises ValueError on a frame of the wrong shape, a non-finite value or a wrong number of frames.
     """
     H, W = rec.height, rec.width
-    t = rec.gt_t
+    t = rec.gt.t
     frame_rows, psnrs, ssims = [], [], []
     star = is_siemens_star(scene)
     geometry = None
@@ -221,7 +221,7 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
             raise ValueError(f"frame {i} holds NaN or inf values")
         if frame_sink is not None:
             frame_sink(i, img)
-        gt = rec.gt_flux(int(idx[i]))
+        gt = rec.gt.flux(int(idx[i]))
         s = metrics.frame_scores(img, gt, white, absolute_scale)
         frame_rows.append({"method": method, "recording": recording, "frame": i, "t_s": float(t[idx[i]]), **s})
         psnrs.append(s["psnr_db"])
@@ -312,7 +312,7 @@ def run_task(task: Task) -> dict:
 
     e = task.entry
     with open_recording(e.path) as rec:
-        idx = evaluation_indices(rec.gt_t, task.rate_hz)
+        idx = evaluation_indices(rec.gt.t, task.rate_hz)
         white = task.white if task.white is not None else _gt_white_point(rec, idx)
         row = _base_row(task, white)
         out = {"row": row, "frame_rows": [], "mtf_rows": []}
@@ -322,7 +322,7 @@ def run_task(task: Task) -> dict:
             missing = [k for k in method.requires if not rec.has(k)]
             if missing:
                 raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
-            times = rec.gt_t[idx]
+            times = rec.gt.t[idx]
             sink = None
             if task.save_reconstructions:
                 sink = _ReconstructionSink(task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5",
@@ -360,10 +360,10 @@ def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float, white:
     from simspad.io.recording import open_recording
 
     with open_recording(entry.path) as rec:
-        idx = evaluation_indices(rec.gt_t, rate_hz)
+        idx = evaluation_indices(rec.gt.t, rate_hz)
         if idx.size == 0:
             return
-        gt = rec.gt_flux(int(idx[idx.size // 2]))
+        gt = rec.gt.flux(int(idx[idx.size // 2]))
     save_png(work_dir / "images" / slug(entry.key) / "gt.png", crop(metrics.display_map(gt, white)))
 
 
@@ -434,7 +434,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     whites = {}
     for e in entries:
         with open_recording(e.path) as rec:
-            idx = evaluation_indices(rec.gt_t, rate_hz)
+            idx = evaluation_indices(rec.gt.t, rate_hz)
             if idx.size == 0:
                 raise SimSpadError("no ground-truth instants to evaluate", path=e.path, field="/gt/t")
             names = list(methods) if methods else available_methods(rec)

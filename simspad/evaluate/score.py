@@ -127,8 +127,8 @@ def _validate_group(group, name: str, entry: RecordingEntry, rate_hz: float, pat
     _numeric(t_ds, f"/{name}/t", path, "float64")
     _numeric(f_ds, f"/{name}/flux", path, "float32")
     with open_recording(entry.path) as rec:
-        idx = evaluation_indices(rec.gt_t, rate_hz)
-        gt_t = rec.gt_t[idx]
+        idx = evaluation_indices(rec.gt.t, rate_hz)
+        gt_t = rec.gt.t[idx]
         H, W = rec.height, rec.width
     if t_ds.ndim != 1:
         raise InputError(f"shape {t_ds.shape}, expected [N] with N = {gt_t.size}", path=path, field=f"/{name}/t")

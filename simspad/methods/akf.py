@@ -267,7 +267,7 @@ def akf_params_for(rec, **overrides) -> AkfParams:
 
     _, _, sigma = event_thresholds(rec)
     values = {"q_threshold": sigma ** 2}
-    a = rec.events_attrs
+    a = rec.events.attrs
     try:
         values.update(pr_area_m2=float(a["qe"]) * float(a.get("fill_factor", 1.0)) * float(a["pixel_pitch_m"]) ** 2,
                       pr_dark_e_s=float(a.get("dark_current_e_s", 0.0)),

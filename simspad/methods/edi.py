@@ -43,8 +43,8 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
     start, the last to ``until_s``); ``duration_s`` is the frame period.
     """
     resp = FrameResponse.from_recording(rec)
-    ts = np.asarray(rec.frames_t_start, dtype=np.float64)
-    te = np.asarray(rec.frames_t_end, dtype=np.float64)
+    ts = np.asarray(rec.frames.t_start, dtype=np.float64)
+    te = np.asarray(rec.frames.t_end, dtype=np.float64)
     K = ts.size
     if K == 0:
         from simspad.errors import InputError
@@ -55,11 +55,11 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
     periods = np.diff(centres) if K > 1 else np.array([te[0] - ts[0]])
     cursor = EventCursor(rec) if use_events else None
     n_pix = int(rec.width) * int(rec.height)
-    bayer = bool(rec.frames_attrs.get("rgb", False)) and str(rec.frames_attrs.get("rgb")).lower() not in ("false", "0")
+    bayer = bool(rec.frames.attrs.get("rgb", False)) and str(rec.frames.attrs.get("rgb")).lower() not in ("false", "0")
     for k in range(K):
         a, b = bounds[k], bounds[k + 1]
         exposure = te[k] - ts[k]
-        dn = rec.frames_dn(k)
+        dn = rec.frames.dn(k)
         if dn.ndim != 2:
             from simspad.errors import InputError
 

@@ -272,7 +272,7 @@ class QBP(Method):
 
     def _run(self, rec, times_s, tally):
         resp = SpadResponse.from_recording(rec)
-        t_start = np.asarray(rec.spad_t_start, np.float64)
+        t_start = np.asarray(rec.spad.t_start, np.float64)
         nb_total = t_start.size // self.block_bins
         if nb_total == 0:
             from simspad.errors import InputError
@@ -292,7 +292,7 @@ class QBP(Method):
             blocks = []
             for j in idx:
                 if j not in cache:
-                    counts = rec.spad_counts(j * self.block_bins, (j + 1) * self.block_bins).astype(np.float64)
+                    counts = rec.spad.counts(j * self.block_bins, (j + 1) * self.block_bins).astype(np.float64)
                     cache[j] = remove_hot_pixels(counts, hot)
                     read.add(j)
                 blocks.append(cache[j])

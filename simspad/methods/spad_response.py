@@ -51,7 +51,7 @@ class SpadResponse:
     def from_recording(cls, rec) -> "SpadResponse":
         from simspad.errors import InputError
 
-        a = rec.spad_attrs
+        a = rec.spad.attrs
         try:
             q = float(a["qe"]) * float(a["fill_factor"]) * float(a["pixel_pitch_m"]) ** 2
             bin_s = float(a["bin_s"])
@@ -61,7 +61,7 @@ class SpadResponse:
         if not (q > 0 and gate_s > 0 and bin_s > 0):
             raise InputError("qe, fill_factor, pixel_pitch_m, gate_s, bin_s must be > 0", path=rec.path,
                              field="/spad attrs")
-        dcr = np.asarray(rec.dcr_cps, dtype=np.float64)
+        dcr = np.asarray(rec.spad.dcr_cps, dtype=np.float64)
         return cls(q, gate_s, bin_s, dcr)
 
 
@@ -98,7 +98,7 @@ class FrameResponse:
     def from_recording(cls, rec) -> "FrameResponse":
         from simspad.errors import InputError
 
-        a = rec.frames_attrs
+        a = rec.frames.attrs
         try:
             return cls(float(a["gain_dn_per_e"]), float(a["black_level_dn"]), float(a["read_noise_e"]),
                        float(a["full_well_e"]), int(a["bit_depth"]),
