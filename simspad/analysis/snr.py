@@ -57,6 +57,8 @@ from pathlib import Path
 import numpy as np
 from scipy.special import ndtr
 
+from simspad.io.atomic import atomic_path
+from simspad.physics.radiometry import flux_scale
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams, sensor_params
 
 DEFAULT_EXPOSURE_S = 10e-3
@@ -126,8 +128,6 @@ def snr_spad_gated_db(flux_ph_s_m2, params: SpadParams | None = None, exposure_s
 
 def reference_flux_1lx() -> float:
     """Sensor-plane photon irradiance of a middle-grey scene at 1 lx (DESIGN §3 defaults), ph s⁻¹ m⁻²."""
-    from simspad.physics.radiometry import flux_scale
-
     return float(flux_scale(1.0, 1.0))
 
 
@@ -166,12 +166,10 @@ def snr_curves(flux_ph_s_m2, exposure_s: float = DEFAULT_EXPOSURE_S) -> dict[str
 
 def plot_snr(out_path: Path, exposure_s: float = DEFAULT_EXPOSURE_S) -> Path:
     """Draw the SNR-versus-flux figure to ``out_path`` (PNG), written atomically."""
-    import matplotlib
+    import matplotlib  # deferred: matplotlib is slow to import and only this figure needs it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from simspad.io.atomic import atomic_path
+    import matplotlib.pyplot as plt  # deferred: after choosing the non-interactive backend
 
     f1 = reference_flux_1lx()
     flux = np.geomspace(1e-3 * f1, 1e6 * f1, 400)
@@ -194,11 +192,3 @@ def plot_snr(out_path: Path, exposure_s: float = DEFAULT_EXPOSURE_S) -> Path:
     plt.close(fig)
     return out_path
 
-
-def snr_from_cli(out_path) -> Path:
-    """The ``simspad snr`` command."""
-    import click
-
-    path = plot_snr(Path(out_path))
-    click.echo(f"wrote {path}")
-    return path

@@ -64,7 +64,8 @@ class EventsView(GroupView):
         return out
 
     def window(self, t0_s: float, t1_s: float) -> dict[str, np.ndarray]:
-        """Events with ``t0_s ≤ t < t1_s``: dict of ``t`` (int64 µs), ``x``, ``y`` (uint16), ``p``, ``label`` (uint8)."""
+        """Events with ``t0_s ≤ t < t1_s``: dict of ``t`` (int64 µs), ``x``, ``y`` (uint16), ``p``, ``label``
+        (uint8)."""
         return self.by_index(*self.index_range(t0_s, t1_s))
 
     def iter_chunks(self, chunk: int = CHUNK_EVENTS, t0_s: float | None = None,
