@@ -16,7 +16,8 @@ from typing import Iterator
 import numpy as np
 from scipy import ndimage
 
-from simspad.methods.events_util import EventCursor, group_by_pixel, mean_exp_level
+from simspad.errors import InputError
+from simspad.methods.event_batches import EventCursor, group_by_pixel, mean_exp_level
 from simspad.methods.registry import BandwidthTally, Method
 from simspad.methods.spad_response import FrameResponse
 from simspad.methods.windows import Measurement, open_loop_frames
@@ -47,8 +48,6 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
     te = np.asarray(rec.frames.t_end, dtype=np.float64)
     K = ts.size
     if K == 0:
-        from simspad.errors import InputError
-
         raise InputError("recording holds no frames", path=rec.path, field="/frames/dn")
     centres = 0.5 * (ts + te)
     bounds = np.concatenate([[ts[0]], 0.5 * (centres[1:] + centres[:-1]), [max(te[-1], until_s)]])
@@ -61,8 +60,6 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
         exposure = te[k] - ts[k]
         dn = rec.frames.dn(k)
         if dn.ndim != 2:
-            from simspad.errors import InputError
-
             raise InputError("frames must be monochrome [H, W] for the frame methods", path=rec.path,
                              field="/frames/dn")
         if bayer:

@@ -25,7 +25,8 @@ from typing import Iterator
 import numba
 import numpy as np
 
-from simspad.methods.events_util import EventBatch, EventCursor, group_by_pixel
+from simspad.errors import InputError
+from simspad.methods.event_batches import EventBatch, EventCursor, group_by_pixel
 from simspad.methods.registry import BandwidthTally, Method, aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
 from simspad.methods.windows import Measurement, open_loop_frames
@@ -248,8 +249,6 @@ def spad_measurements(rec, n_bins: int, *, use_events: bool, until_s: float, tal
     n_total = int(t_start.size)
     n_win = n_total // n_bins
     if n_win == 0:
-        from simspad.errors import InputError
-
         raise InputError(f"recording has {n_total} SPAD bins, fewer than one aggregate of {n_bins}",
                          path=rec.path, field="/spad/bits")
     cursor = EventCursor(rec) if use_events else None

@@ -29,6 +29,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from simspad.errors import InputError
 from simspad.methods.registry import Method
 from simspad.methods.spad_response import SpadResponse, estimate_flux
 
@@ -275,8 +276,6 @@ class QBP(Method):
         t_start = np.asarray(rec.spad.t_start, np.float64)
         nb_total = t_start.size // self.block_bins
         if nb_total == 0:
-            from simspad.errors import InputError
-
             raise InputError(f"fewer SPAD bins than one block of {self.block_bins}", path=rec.path,
                              field="/spad/bits")
         hot = resp.dcr_cps > self.hot_dcr_cps

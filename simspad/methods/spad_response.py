@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simspad.errors import InputError
 from simspad.physics import spad_statistics as _stats
 from simspad.physics.spad_statistics import detection_probability  # noqa: F401  (re-exported)
 
@@ -49,8 +50,6 @@ class SpadResponse:
 
     @classmethod
     def from_recording(cls, rec) -> "SpadResponse":
-        from simspad.errors import InputError
-
         a = rec.spad.attrs
         try:
             q = float(a["qe"]) * float(a["fill_factor"]) * float(a["pixel_pitch_m"]) ** 2
@@ -96,8 +95,6 @@ class FrameResponse:
 
     @classmethod
     def from_recording(cls, rec) -> "FrameResponse":
-        from simspad.errors import InputError
-
         a = rec.frames.attrs
         try:
             return cls(float(a["gain_dn_per_e"]), float(a["black_level_dn"]), float(a["read_noise_e"]),

@@ -5,7 +5,7 @@ import numpy as np
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
 from simspad.methods.edi import edi_deblur
-from simspad.methods.events_util import EventBatch
+from simspad.methods.event_batches import EventBatch
 from tests.helpers.synthetic_recordings import FRAME_ATTRS, write_recording
 
 

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from simspad.errors import InputError
+
 
 @dataclass
 class EventBatch:
@@ -53,8 +55,6 @@ class EventBatch:
 
 def event_thresholds(rec) -> tuple[float, float, float]:
     """Nominal (threshold_on, threshold_off, threshold_sigma) from the ``/events`` attrs."""
-    from simspad.errors import InputError
-
     a = rec.events.attrs
     try:
         c_on = float(a["threshold_on"])
