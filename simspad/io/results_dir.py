@@ -9,7 +9,8 @@ Layout (one directory per run, written atomically)::
     images/<rec>/gt.png, images/<rec>/<method>.png, images/<rec>/<method>_vs_gt.png
                        display-mapped crops of the chosen instant (ground truth beside the method)
     reconstructions/<rec>/<method>.h5
-                       the reconstructions as scored (/t [N] float64 s, /flux [N,H,W] float32 ph s⁻¹ m⁻²)
+                       the reconstructions as scored (/t [N] float64 s, /flux [N,H,W] float32 ph s⁻¹ m⁻²;
+                       written by :class:`simspad.io.reconstructions.ReconstructionSink`)
 """
 
 from __future__ import annotations
