@@ -189,7 +189,7 @@ def part_units(spec, tmp: Path) -> dict:
         for d in (half, full):
             t, p = _timed_sim(rdir, tmp / "spad.h5", ["spad"], params, lux, seq.start_s, d)
             with open_recording(p) as rec:
-                ts.append((t, rec.spad_n_bins * w * h / 1e9))
+                ts.append((t, rec.spad.n_bins * w * h / 1e9))
         u["spad_s_per_gbit"] = max((ts[1][0] - ts[0][0]) - gt_marg, 1e-9) / (ts[1][1] - ts[0][1])
         print(f"    spad        {u['spad_s_per_gbit']:.4g} s per Gbit  ({ts[1][0]:.2f} s for {ts[1][1] * 1e3:.3g} Mbit "
               "incl. fixed costs)")
@@ -198,7 +198,7 @@ def part_units(spec, tmp: Path) -> dict:
         for d in (half, full):
             t, p = _timed_sim(rdir, tmp / "frames.h5", ["frames"], params, lux, seq.start_s, d)
             with open_recording(p) as rec:
-                ts.append((t, rec.n_frames * mp))
+                ts.append((t, rec.frames.n_frames * mp))
         dn = ts[1][1] - ts[0][1]
         u["frames_s_per_mp_frame"] = max((ts[1][0] - ts[0][0]) - gt_marg, 1e-9) / dn if dn > 0 else ts[1][0] / max(ts[1][1], mp)
         print(f"    frames      {u['frames_s_per_mp_frame']:.4g} s per MP·frame")
@@ -209,7 +209,7 @@ def part_units(spec, tmp: Path) -> dict:
             for d in (half, full):
                 t, p = _timed_sim(rdir, tmp / "events.h5", ["events"], params, lux_e, seq.start_s, d, reps=1)
                 with open_recording(p) as rec:
-                    row.append((t, rec.n_events))
+                    row.append((t, rec.events.n_events))
             ev_t.append(max(row[1][0] - row[0][0] - gt_marg, 1e-9))
             ev_n.append(row[1][1])
         mp_s = mp * (full - half)

@@ -14,7 +14,7 @@ import time
 import numpy as np
 from scipy.optimize import brentq
 
-from simspad.methods.events_util import EventBatch
+from simspad.methods.event_batches import EventBatch
 from simspad.methods.nedi import nedi_deblur
 
 Q_M2 = 0.45 * 0.105 * (16.38e-6) ** 2

@@ -34,39 +34,40 @@ def main() -> None:
     args = parser.parse_args()
 
     with open_recording(args.recording) as rec:
-        gt_t = rec.gt_t
+        gt_t = rec.gt.t
         i_gt = len(gt_t) // 2 if args.time is None else int(np.argmin(np.abs(gt_t - args.time)))
         t = float(gt_t[i_gt])
-        gt = rec.gt_flux(i_gt)
+        gt = rec.gt.flux(i_gt)
         panels = [("ground truth (ph s⁻¹ m⁻²)", gt, "gray")]
 
         if rec.has("spad"):
-            a = rec.spad_attrs
-            t_start = rec.spad_t_start
+            a = rec.spad.attrs
+            t_start = rec.spad.t_start
             k = int(np.clip(np.searchsorted(t_start, t) - args.bins // 2, 0, max(len(t_start) - args.bins, 0)))
             n = min(args.bins, len(t_start) - k)
-            counts = rec.spad_counts(k, k + n)
+            counts = rec.spad.counts(k, k + n)
             q_m2 = detection_area_m2(a["pixel_pitch_m"], a["fill_factor"], a["qe"])
             flux = estimate_flux(counts, n, q_m2, a["gate_s"], rec.dcr_cps)
-            panels.append((f"SPAD bit plane {k}", rec.spad_bits(k, k + 1)[0], "gray"))
+            flux = estimate_flux(counts, n, q_m2, a["gate_s"], rec.spad.dcr_cps)
+            panels.append((f"SPAD bit plane {k}", rec.spad.bits(k, k + 1)[0], "gray"))
             panels.append((f"SPAD {n} bins, ML estimate", flux, "gray"))
             # Ground truth averaged over the aggregate's span, to compare like with like.
             sel = (gt_t >= t_start[k]) & (gt_t <= t_start[k + n - 1] + a["bin_s"])
-            ref = rec.gt_flux(np.flatnonzero(sel)).mean(axis=0) if sel.any() else gt
+            ref = rec.gt.flux(np.flatnonzero(sel)).mean(axis=0) if sel.any() else gt
             ok = (counts > 10) & (counts < n - 10)
             rel = np.log(np.maximum(flux[ok], 1e-30) / ref[ok])
-            pred = np.sqrt(log_flux_variance(ref[ok], n, q_m2, a["gate_s"], rec.dcr_cps[ok]))
+            pred = np.sqrt(log_flux_variance(ref[ok], n, q_m2, a["gate_s"], rec.spad.dcr_cps[ok]))
             print(f"SPAD gate {a['gate_s'] * 1e6:.3g} µs, {n} bins: log error mean {rel.mean():+.4f}, "
                   f"rms {rel.std():.4f} vs predicted {np.sqrt(np.mean(pred ** 2)):.4f} ({ok.sum()} pixels)")
 
         if rec.has("frames"):
-            fa = rec.frames_attrs
-            j = int(np.clip(np.searchsorted(rec.frames_t_start, t, side="right") - 1, 0, rec.n_frames - 1))
-            dn = rec.frames_dn(j).astype(np.float64) - fa["black_level_dn"]
+            fa = rec.frames.attrs
+            j = int(np.clip(np.searchsorted(rec.frames.t_start, t, side="right") - 1, 0, rec.frames.n_frames - 1))
+            dn = rec.frames.dn(j).astype(np.float64) - fa["black_level_dn"]
             panels.append((f"frame {j} (DN − black, {fa['exposure_s'] * 1e3:.3g} ms)", dn, "gray"))
 
         if rec.has("events"):
-            ev = rec.events(t - 0.5e-3, t + 0.5e-3)
+            ev = rec.events.window(t - 0.5e-3, t + 0.5e-3)
             img = np.zeros((rec.height, rec.width))
             np.add.at(img, (ev["y"], ev["x"]), np.where(ev["p"] == 1, 1.0, -1.0))
             lim = max(1.0, np.abs(img).max())

@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import ndtr
 
+from simspad.io.atomic import atomic_path
 from simspad.physics.photoreceptor import cutoff_hz
 from simspad.physics.radiometry import detection_rate, flux_scale
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams, sensor_params
@@ -163,12 +164,10 @@ def snr_curves(flux_ph_s_m2, exposure_s: float = DEFAULT_EXPOSURE_S) -> dict[str
 
 def plot_snr(out_path: Path, exposure_s: float = DEFAULT_EXPOSURE_S) -> Path:
     """Draw the SNR-versus-flux figure to ``out_path`` (PNG), written atomically."""
-    import matplotlib
+    import matplotlib  # deferred: matplotlib is slow to import and only this figure needs it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from simspad.io.atomic import atomic_path
+    import matplotlib.pyplot as plt  # deferred: after choosing the non-interactive backend
 
     f1 = reference_flux_1lx()
     flux = np.geomspace(1e-3 * f1, 1e6 * f1, 400)
@@ -191,11 +190,3 @@ def plot_snr(out_path: Path, exposure_s: float = DEFAULT_EXPOSURE_S) -> Path:
     plt.close(fig)
     return out_path
 
-
-def snr_from_cli(out_path) -> Path:
-    """The ``simspad snr`` command."""
-    import click
-
-    path = plot_snr(Path(out_path))
-    click.echo(f"wrote {path}")
-    return path

@@ -102,7 +102,7 @@ def generate(spec, out_dir, executor, scheduler, workers):
 @click.option("--rate", "rate_hz", type=float, default=None, help="Evaluation rate in Hz (default: spec or 1000).")
 def evaluate(target, methods, out_dir, rate_hz):
     """Run fusion methods and baselines on a dataset or recording and score them."""
-    from simspad.evaluate.evaluate import evaluate_from_cli
+    from simspad.cli.evaluate import evaluate_from_cli
 
     evaluate_from_cli(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz)
 
@@ -112,7 +112,7 @@ def evaluate(target, methods, out_dir, rate_hz):
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None, help="Output directory.")
 def leaderboard(results_dirs, out_dir):
     """Build the leaderboard (markdown, csv, html with plots) from one or more results directories."""
-    from simspad.evaluate.leaderboard import leaderboard_from_cli
+    from simspad.cli.leaderboard import leaderboard_from_cli
 
     leaderboard_from_cli(results_dirs, out_dir=out_dir)
 
@@ -123,7 +123,7 @@ def leaderboard(results_dirs, out_dir):
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None, help="Results directory.")
 def score(submission, dataset_dir, out_dir):
     """Score an external method's reconstructions (HDF5 submission) against a dataset."""
-    from simspad.evaluate.score import score_from_cli
+    from simspad.cli.score import score_from_cli
 
     score_from_cli(submission, dataset_dir=dataset_dir, out_dir=out_dir)
 
@@ -132,7 +132,7 @@ def score(submission, dataset_dir, out_dir):
 @click.option("--out", "out_path", type=click.Path(path_type=Path), default=Path("snr.png"), show_default=True)
 def snr(out_path):
     """Plot the analytic SNR versus photon flux of the three sensors."""
-    from simspad.analysis.snr import snr_from_cli
+    from simspad.cli.snr import snr_from_cli
 
     snr_from_cli(out_path)
 

@@ -89,7 +89,7 @@ def describe_recording(path) -> str:
         if a.get("recording_hash"):
             lines.append(f"  hash        {str(a['recording_hash'])[:16]}")
         if rec.has("gt"):
-            t = rec.gt_t
+            t = rec.gt.t
             rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
             lines.append(f"  gt          {len(t)} sharp frames at {rate:.4g} Hz, {_fmt_bytes(_group_bytes(rec.h5, 'gt'))}"
                          + (", depth" if "gt/depth" in rec.h5 else ""))
@@ -106,12 +106,12 @@ def describe_recording(path) -> str:
 
 
 def _spad_lines(rec, n_px: int, dur: float) -> list[str]:
-    sa = rec.spad_attrs
-    n_bins = rec.spad_n_bins
+    sa = rec.spad.attrs
+    n_bins = rec.spad.n_bins
     bin_s = float(sa["bin_s"])
     sample = min(n_bins, _SPAD_SAMPLE_BINS)
-    p1 = float(rec.spad_counts(0, sample).sum()) / (sample * n_px) if sample else float("nan")
-    dcr = rec.dcr_cps
+    p1 = float(rec.spad.counts(0, sample).sum()) / (sample * n_px) if sample else float("nan")
+    dcr = rec.spad.dcr_cps
     return [f"    spad      {n_bins} binary frames ({1 / bin_s / 1e3:.4g} kHz), {_fmt_bytes(_group_bytes(rec.h5, 'spad'))}",
             f"              {_attr_line(sa, ('preset', 'bin_s', 'gate_s', 'pixel_pitch_m', 'fill_factor', 'qe', 'dead_time_s'))}",
             f"              mean P(1) {p1:.4f} (first {sample} frames), DCR median {np.median(dcr):.3g} cps",
@@ -120,12 +120,12 @@ def _spad_lines(rec, n_px: int, dur: float) -> list[str]:
 
 
 def _frame_lines(rec, dur: float) -> list[str]:
-    fa = rec.frames_attrs
-    k = rec.n_frames
-    t0 = rec.frames_t_start
+    fa = rec.frames.attrs
+    k = rec.frames.n_frames
+    t0 = rec.frames.t_start
     rate = float(fa.get("frame_rate_hz", (k - 1) / (t0[-1] - t0[0]) if k > 1 and t0[-1] > t0[0] else 0.0))
     bits = int(fa.get("bit_depth", 16))
-    mean_dn = float(rec.frames_dn(0).mean()) if k else float("nan")
+    mean_dn = float(rec.frames.dn(0).mean()) if k else float("nan")
     return [f"    frames    {k} frames at {rate:.4g} fps, {_fmt_bytes(_group_bytes(rec.h5, 'frames'))}",
             f"              {_attr_line(fa, ('preset', 'exposure_s', 'gain_dn_per_e', 'read_noise_e', 'full_well_e', 'bit_depth', 'qe', 'pixel_pitch_m'))}",
             f"              first frame mean {mean_dn:.1f} DN",
@@ -133,8 +133,8 @@ def _frame_lines(rec, dur: float) -> list[str]:
 
 
 def _event_lines(rec, n_px: int, dur: float) -> list[str]:
-    ea = rec.events_attrs
-    n = rec.n_events
+    ea = rec.events.attrs
+    n = rec.events.n_events
     rate_px = n / (n_px * dur) if dur > 0 else float("nan")
     labels = ""
     if n and "events/label" in rec.h5:

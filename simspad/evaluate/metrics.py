@@ -29,6 +29,8 @@ from __future__ import annotations
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
+from scipy.ndimage import map_coordinates
+from skimage.metrics import mean_squared_error, peak_signal_noise_ratio, structural_similarity
 
 from simspad.physics.colour import srgb_encode
 
@@ -189,13 +191,9 @@ def align_log_affine(rec: np.ndarray, gt: np.ndarray, white: float) -> np.ndarra
 
 def psnr_db(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
     """PSNR (dB) of display-mapped frames in [0, 1] (scikit-image, data_range=1), capped at PSNR_CAP_DB."""
-    from skimage.metrics import mean_squared_error
-
     mse = float(mean_squared_error(np.asarray(gt_display, np.float64), np.asarray(rec_display, np.float64)))
     if mse <= 10 ** (-PSNR_CAP_DB / 10):
         return PSNR_CAP_DB
-    from skimage.metrics import peak_signal_noise_ratio
-
     return float(peak_signal_noise_ratio(np.asarray(gt_display, np.float64), np.asarray(rec_display, np.float64),
                                          data_range=1.0))
 
@@ -203,8 +201,6 @@ def psnr_db(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
 def ssim(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
     """SSIM of display-mapped frames in [0, 1] (scikit-image, data_range=1, 7×7 window or the largest odd
     window that fits a tiny image)."""
-    from skimage.metrics import structural_similarity
-
     g = np.asarray(gt_display, np.float64)
     r = np.asarray(rec_display, np.float64)
     win = min(7, min(g.shape[-2:]))
@@ -231,8 +227,6 @@ def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: 
 # -- MTF from a Siemens star ------------------------------------------------------------------------------------
 
 def _circle_samples(img: np.ndarray, cy: float, cx: float, r: float, n_samples: int) -> np.ndarray:
-    from scipy.ndimage import map_coordinates
-
     theta = np.arange(n_samples) * (2 * np.pi / n_samples)
     coords = np.vstack([cy + r * np.sin(theta), cx + r * np.cos(theta)])
     return map_coordinates(np.asarray(img, np.float64), coords, order=1, mode="nearest")

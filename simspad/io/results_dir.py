@@ -9,7 +9,8 @@ Layout (one directory per run, written atomically)::
     images/<rec>/gt.png, images/<rec>/<method>.png, images/<rec>/<method>_vs_gt.png
                        display-mapped crops of the chosen instant (ground truth beside the method)
     reconstructions/<rec>/<method>.h5
-                       the reconstructions as scored (/t [N] float64 s, /flux [N,H,W] float32 ph s⁻¹ m⁻²)
+                       the reconstructions as scored (/t [N] float64 s, /flux [N,H,W] float32 ph s⁻¹ m⁻²;
+                       written by :class:`simspad.io.reconstructions.ReconstructionSink`)
 """
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ import re
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
+
+from simspad.errors import SimSpadError
 
 RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "psnr_db", "ssim",
                   "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
@@ -81,8 +85,6 @@ def read_csv(path: Path) -> list[dict]:
 
 def save_png(path: Path, img01: np.ndarray) -> None:
     """Write a [H,W] image in [0, 1] as an 8-bit greyscale PNG."""
-    from PIL import Image
-
     path.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(np.round(np.clip(img01, 0, 1) * 255).astype(np.uint8), mode="L").save(path)
 
@@ -92,6 +94,22 @@ def crop(img: np.ndarray, size: int = CROP_PX) -> np.ndarray:
     h, w = img.shape[:2]
     y0, x0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
     return img[y0:y0 + size, x0:x0 + size]
+
+
+def write_images(work_dir: Path, key: str, method: str, images) -> str:
+    """Save the GT crop, the method's crop and the pair side by side; return the pair's relative path.
+
+    ``images`` is (method crop, ground-truth crop), both display-mapped to [0, 1]; they go to
+    ``images/<key>/gt.png``, ``<method>.png`` and ``<method>_vs_gt.png`` (a 4-pixel white gap between them).
+    """
+    rec_img, gt_img = images
+    d = work_dir / "images" / slug(key)
+    save_png(d / "gt.png", gt_img)
+    name = slug(method)
+    save_png(d / f"{name}.png", rec_img)
+    gap = np.ones((gt_img.shape[0], 4), np.float32)
+    save_png(d / f"{name}_vs_gt.png", np.hstack([rec_img, gap, gt_img]))
+    return (d / f"{name}_vs_gt.png").relative_to(work_dir).as_posix()
 
 
 def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_rows: list[dict], meta: dict) -> None:
@@ -110,8 +128,6 @@ def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_r
 
 def check_output_dir(out_dir: Path) -> None:
     """Refuse to replace a non-empty directory that is not a SimSPAD results directory."""
-    from simspad.errors import SimSpadError
-
     if out_dir.exists():
         if not out_dir.is_dir():
             raise SimSpadError("exists and is not a directory", path=out_dir, field="--out")

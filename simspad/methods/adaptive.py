@@ -42,7 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 from simspad.methods.akf import NediAkf, akf_frames, akf_params_for
-from simspad.methods.events_util import EventBatch
+from simspad.methods.event_batches import EventBatch, event_thresholds
 from simspad.methods.nedi import nedi_deblur
 from simspad.methods.registry import aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
@@ -188,8 +188,6 @@ class AdaptiveNediAkf(NediAkf):
         shape = (int(rec.height), int(rec.width))
         threshold = self.threshold
         if threshold == "auto":
-            from simspad.methods.events_util import event_thresholds
-
             c_on, c_off, _ = event_thresholds(rec)
             threshold = (0.25 * (c_on + c_off)) ** 2  # (c/2)², c the mean nominal threshold
         policy = TilePolicy(shape, tally, SpadResponse.from_recording(rec), self.tile_px, self.ratio,

@@ -49,7 +49,11 @@ from typing import Iterable, Iterator
 
 import numba
 import numpy as np
+from scipy.ndimage import uniform_filter
 
+from simspad.methods.edi import frame_measurements
+from simspad.methods.event_batches import event_thresholds
+from simspad.methods.nedi import aggregate_bins, spad_measurements
 from simspad.methods.registry import Method
 from simspad.methods.windows import Measurement
 from simspad.physics.photoreceptor import time_constant_s
@@ -183,8 +187,6 @@ def inflate_by_innovation(st: AkfState, lf: np.ndarray, var: np.ndarray, mask, w
     pixels), ``r = mean ν² / mean(P + var)`` > 1 reveals it and P is multiplied by r (never decreased). This is
     the classic covariance-matching adaptation (Mehra 1972) applied once per frame.
     """
-    from scipy.ndimage import uniform_filter
-
     shape = (st.height, st.width)
     nu2 = (lf - st.L) ** 2
     ratio = uniform_filter(nu2.reshape(shape), window_px, mode="nearest") / uniform_filter(
@@ -265,11 +267,9 @@ def akf_frames(measurements: Iterable[Measurement], times_s: np.ndarray, shape: 
 
 def akf_params_for(rec, **overrides) -> AkfParams:
     """Filter parameters with Q_thr from the recording's threshold mismatch (``threshold_sigma``)."""
-    from simspad.methods.events_util import event_thresholds
-
     _, _, sigma = event_thresholds(rec)
     values = {"q_threshold": sigma ** 2}
-    a = rec.events_attrs
+    a = rec.events.attrs
     try:
         values.update(pr_area_m2=detection_area_m2(float(a["pixel_pitch_m"]), float(a.get("fill_factor", 1.0)),
                                                    float(a["qe"])),
@@ -297,8 +297,6 @@ class NediAkf(Method):
         self.akf = akf
 
     def _measurements(self, rec, times_s, tally):
-        from simspad.methods.nedi import aggregate_bins, spad_measurements
-
         n = aggregate_bins(rec, self.aggregate_hz, self.n_bins)
         until = float(times_s[-1]) + 1e-9 if times_s.size else 0.0
         return spad_measurements(rec, n, use_events=True, until_s=until, tally=tally)
@@ -322,8 +320,6 @@ class AkfFrames(Method):
         self.akf = akf
 
     def _run(self, rec, times_s, tally):
-        from simspad.methods.edi import frame_measurements
-
         until = float(times_s[-1]) + 1e-9 if times_s.size else 0.0
         meas = frame_measurements(rec, use_events=True, until_s=until, tally=tally)
         yield from akf_frames(meas, times_s, (int(rec.height), int(rec.width)), akf_params_for(rec, **self.akf),

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from simspad.methods.events_util import EventCursor
+from simspad.methods.event_batches import EventCursor
 from simspad.methods.registry import Method
 
 

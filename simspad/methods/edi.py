@@ -16,7 +16,8 @@ from typing import Iterator
 import numpy as np
 from scipy import ndimage
 
-from simspad.methods.events_util import EventCursor, group_by_pixel, mean_exp_level
+from simspad.errors import InputError
+from simspad.methods.event_batches import EventCursor, group_by_pixel, mean_exp_level
 from simspad.methods.registry import BandwidthTally, Method
 from simspad.methods.spad_response import FrameResponse
 from simspad.methods.windows import Measurement, open_loop_frames
@@ -43,26 +44,22 @@ def frame_measurements(rec, *, use_events: bool, until_s: float, tally: Bandwidt
     start, the last to ``until_s``); ``duration_s`` is the frame period.
     """
     resp = FrameResponse.from_recording(rec)
-    ts = np.asarray(rec.frames_t_start, dtype=np.float64)
-    te = np.asarray(rec.frames_t_end, dtype=np.float64)
+    ts = np.asarray(rec.frames.t_start, dtype=np.float64)
+    te = np.asarray(rec.frames.t_end, dtype=np.float64)
     K = ts.size
     if K == 0:
-        from simspad.errors import InputError
-
         raise InputError("recording holds no frames", path=rec.path, field="/frames/dn")
     centres = 0.5 * (ts + te)
     bounds = np.concatenate([[ts[0]], 0.5 * (centres[1:] + centres[:-1]), [max(te[-1], until_s)]])
     periods = np.diff(centres) if K > 1 else np.array([te[0] - ts[0]])
     cursor = EventCursor(rec) if use_events else None
     n_pix = int(rec.width) * int(rec.height)
-    bayer = bool(rec.frames_attrs.get("rgb", False)) and str(rec.frames_attrs.get("rgb")).lower() not in ("false", "0")
+    bayer = bool(rec.frames.attrs.get("rgb", False)) and str(rec.frames.attrs.get("rgb")).lower() not in ("false", "0")
     for k in range(K):
         a, b = bounds[k], bounds[k + 1]
         exposure = te[k] - ts[k]
-        dn = rec.frames_dn(k)
+        dn = rec.frames.dn(k)
         if dn.ndim != 2:
-            from simspad.errors import InputError
-
             raise InputError("frames must be monochrome [H, W] for the frame methods", path=rec.path,
                              field="/frames/dn")
         if bayer:

@@ -25,7 +25,8 @@ from typing import Iterator
 import numba
 import numpy as np
 
-from simspad.methods.events_util import EventBatch, EventCursor, group_by_pixel
+from simspad.errors import InputError
+from simspad.methods.event_batches import EventBatch, EventCursor, group_by_pixel
 from simspad.methods.registry import BandwidthTally, Method, aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
 from simspad.methods.windows import Measurement, open_loop_frames
@@ -231,7 +232,7 @@ def aggregate_bins(rec, aggregate_hz: float | None = None, n_bins: int | None = 
     """Bins per aggregate: ``n_bins`` if given, else ``round(1/(aggregate_hz·bin_s))`` (≥ 1)."""
     if n_bins is not None:
         return max(int(n_bins), 1)
-    bin_s = float(rec.spad_attrs["bin_s"])
+    bin_s = float(rec.spad.attrs["bin_s"])
     return max(int(round(1.0 / ((aggregate_hz or DEFAULT_AGGREGATE_HZ) * bin_s))), 1)
 
 
@@ -244,12 +245,10 @@ def spad_measurements(rec, n_bins: int, *, use_events: bool, until_s: float, tal
     the events read and the covered span; the aggregate readouts are charged by whoever uses them.
     """
     resp = SpadResponse.from_recording(rec)
-    t_start = np.asarray(rec.spad_t_start, dtype=np.float64)
+    t_start = np.asarray(rec.spad.t_start, dtype=np.float64)
     n_total = int(t_start.size)
     n_win = n_total // n_bins
     if n_win == 0:
-        from simspad.errors import InputError
-
         raise InputError(f"recording has {n_total} SPAD bins, fewer than one aggregate of {n_bins}",
                          path=rec.path, field="/spad/bits")
     cursor = EventCursor(rec) if use_events else None
@@ -272,7 +271,7 @@ def spad_measurements(rec, n_bins: int, *, use_events: bool, until_s: float, tal
         bin_t = t_start[k0:k1] + offset
         f = 0.5 * (a + b_nominal)
         events = cursor.take(a, b) if cursor is not None else None
-        counts = rec.spad_counts(k0, k1)
+        counts = rec.spad.counts(k0, k1)
         phi, var, lref = nedi_deblur(counts, n_bins, bin_t, events, f, resp.q_m2, resp.gate_s, resp.dcr_cps,
                                      linear=linear)
         tally.cover(a, max(b_nominal, min(b, until_s)))

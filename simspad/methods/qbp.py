@@ -29,6 +29,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from simspad.errors import InputError
 from simspad.methods.registry import Method
 from simspad.methods.spad_response import SpadResponse, estimate_flux
 
@@ -272,11 +273,9 @@ class QBP(Method):
 
     def _run(self, rec, times_s, tally):
         resp = SpadResponse.from_recording(rec)
-        t_start = np.asarray(rec.spad_t_start, np.float64)
+        t_start = np.asarray(rec.spad.t_start, np.float64)
         nb_total = t_start.size // self.block_bins
         if nb_total == 0:
-            from simspad.errors import InputError
-
             raise InputError(f"fewer SPAD bins than one block of {self.block_bins}", path=rec.path,
                              field="/spad/bits")
         hot = resp.dcr_cps > self.hot_dcr_cps
@@ -292,7 +291,7 @@ class QBP(Method):
             blocks = []
             for j in idx:
                 if j not in cache:
-                    counts = rec.spad_counts(j * self.block_bins, (j + 1) * self.block_bins).astype(np.float64)
+                    counts = rec.spad.counts(j * self.block_bins, (j + 1) * self.block_bins).astype(np.float64)
                     cache[j] = remove_hot_pixels(counts, hot)
                     read.add(j)
                 blocks.append(cache[j])

@@ -22,6 +22,8 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from simspad.errors import InputError, SimSpadError
+
 
 @dataclass(frozen=True)
 class Bandwidth:
@@ -127,8 +129,6 @@ class Method(abc.ABC):
 
     def reconstruct(self, rec, times_s) -> Reconstruction:
         """Reconstruct flux frames at ``times_s`` (seconds, non-decreasing) from recording ``rec``."""
-        from simspad.errors import InputError
-
         times = np.asarray(times_s, dtype=np.float64).reshape(-1)
         if times.size and np.any(np.diff(times) < 0):
             raise InputError("reconstruction instants must be non-decreasing", path=getattr(rec, "path", None),
@@ -169,6 +169,7 @@ def register(method) -> None:
 def _ensure_builtins() -> None:
     if _REGISTRY:
         return
+    # deferred: builtins imports every method module, and each imports this one (Method, register): a cycle
     from simspad.methods import builtins  # noqa: F401  (registers on import)
 
 
@@ -179,8 +180,6 @@ def get_method(name: str, **params) -> Method:
     """
     _ensure_builtins()
     if name not in _REGISTRY:
-        from simspad.errors import SimSpadError
-
         raise SimSpadError(f"unknown method {name!r} (expected one of {', '.join(sorted(_REGISTRY))})",
                            field="methods")
     factory = _REGISTRY[name]
@@ -189,8 +188,6 @@ def get_method(name: str, **params) -> Method:
     try:
         return factory(**params)
     except TypeError as exc:
-        from simspad.errors import SimSpadError
-
         raise SimSpadError(f"bad parameters {sorted(params)} for method {name!r} ({exc})",
                            field=f"methods.{name}") from None
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simspad.errors import InputError
 from simspad.physics import spad_statistics as _stats
 from simspad.physics.radiometry import detection_area_m2
 from simspad.physics.spad_statistics import detection_probability  # noqa: F401  (re-exported)
@@ -50,9 +51,7 @@ class SpadResponse:
 
     @classmethod
     def from_recording(cls, rec) -> "SpadResponse":
-        from simspad.errors import InputError
-
-        a = rec.spad_attrs
+        a = rec.spad.attrs
         try:
             q = detection_area_m2(float(a["pixel_pitch_m"]), float(a["fill_factor"]), float(a["qe"]))
             bin_s = float(a["bin_s"])
@@ -62,7 +61,7 @@ class SpadResponse:
         if not (q > 0 and gate_s > 0 and bin_s > 0):
             raise InputError("qe, fill_factor, pixel_pitch_m, gate_s, bin_s must be > 0", path=rec.path,
                              field="/spad attrs")
-        dcr = np.asarray(rec.dcr_cps, dtype=np.float64)
+        dcr = np.asarray(rec.spad.dcr_cps, dtype=np.float64)
         return cls(q, gate_s, bin_s, dcr)
 
 
@@ -97,9 +96,7 @@ class FrameResponse:
 
     @classmethod
     def from_recording(cls, rec) -> "FrameResponse":
-        from simspad.errors import InputError
-
-        a = rec.frames_attrs
+        a = rec.frames.attrs
         try:
             return cls(float(a["gain_dn_per_e"]), float(a["black_level_dn"]), float(a["read_noise_e"]),
                        float(a["full_well_e"]), int(a["bit_depth"]),

@@ -2,7 +2,7 @@
 
 A :class:`Measurement` is one deblurred (or naively inverted) intensity image valid over a time interval
 ``[a_s, b_s)``: ``ln Φ(t) = ln Φ(f) + ℓ(t) − ℓ(f)`` for t in the interval, with ℓ the event level counted from
-``a_s`` (:mod:`simspad.methods.events_util`). Windows tile time contiguously and are produced lazily, in order,
+``a_s`` (:mod:`simspad.methods.event_batches`). Windows tile time contiguously and are produced lazily, in order,
 so methods stream through long recordings holding one window's events at a time.
 
 :func:`open_loop_frames` turns a measurement stream into output frames without any filter (NI, NEDI, EDI).
@@ -15,7 +15,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from simspad.methods.events_util import EventBatch, levels_at
+from simspad.methods.event_batches import EventBatch, levels_at
 
 
 @dataclass

@@ -11,6 +11,7 @@ import pytest
 
 from simspad.cli import main
 from simspad.evaluate import metrics
+from simspad.evaluate.recordings import list_recordings
 from simspad.io.results_dir import read_csv
 from tests.helpers.evaluation_data import write_submission
 
@@ -120,8 +121,6 @@ def test_leaderboard_renders_in_headless_chromium(evaluated, tmp_path):
 
 
 def test_recordings_are_found_with_and_without_a_manifest(evaluated, tmp_path):
-    from simspad.evaluate.evaluate import list_recordings
-
     root, ds = evaluated
     entries, manifest = list_recordings(ds)
     assert [e.rel for e in entries] == ["recordings/ramp/ramp_10lx.h5", "recordings/ramp/ramp_100lx.h5"]

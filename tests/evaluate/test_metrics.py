@@ -5,7 +5,7 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from simspad.evaluate import metrics
-from simspad.evaluate.evaluate import evaluation_indices
+from simspad.evaluate.protocol import evaluation_indices
 
 
 def test_psnr_of_a_known_mse():

@@ -40,13 +40,13 @@ def test_round_trip_bits_events_and_determinism(tmp_path):
     assert digest[0] == digest[1], "identical data must give identical bytes"
     with open_recording(tmp_path / "a.h5") as rec:
         assert rec.sensors == ("spad", "events")
-        np.testing.assert_array_equal(rec.spad_bits(0, rec.spad_n_bins), bits)
-        np.testing.assert_array_equal(rec.spad_counts(17, 250, chunk=50), bits[17:250].sum(0))
+        np.testing.assert_array_equal(rec.spad.bits(0, rec.spad.n_bins), bits)
+        np.testing.assert_array_equal(rec.spad.counts(17, 250, chunk=50), bits[17:250].sum(0))
         for t0, t1 in ((0.0, 0.003), (0.0012345, 0.0021), (0.0005, 0.0005)):
-            ev = rec.events(t0, t1)
+            ev = rec.events.window(t0, t1)
             expected = t_us[(t_us >= t0 * 1e6 - 1e-6) & (t_us < t1 * 1e6 - 1e-6)]
             np.testing.assert_array_equal(ev["t"], expected)
-        assert sum(len(c["t"]) for c in rec.iter_events(chunk=77)) == t_us.size
+        assert sum(len(c["t"]) for c in rec.events.iter_chunks(chunk=77)) == t_us.size
         assert rec.spec == {"a": 1}
 
 

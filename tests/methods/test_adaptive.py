@@ -35,11 +35,11 @@ def _rms_log(out, gt):
 @pytest.mark.parametrize("integrate", [False, True])
 def test_adaptive_reads_where_the_scene_moves(rec_path, integrate):
     with open_recording(rec_path) as rec:
-        gt = rec.gt_flux().astype(np.float64)
-        full = get_method("nedi_akf").reconstruct(rec, rec.gt_t)
+        gt = rec.gt.flux().astype(np.float64)
+        full = get_method("nedi_akf").reconstruct(rec, rec.gt.t)
         out_full = np.stack(list(full))
         m = get_method("adaptive_nedi_akf", tile_px=8, integrate=integrate)
-        ad = m.reconstruct(rec, rec.gt_t)
+        ad = m.reconstruct(rec, rec.gt.t)
         out_ad = np.stack(list(ad))
     pol = m.last_policy
     # fewer SPAD readouts than the full-rate filter (the static half is read once) ...
@@ -53,7 +53,7 @@ def test_adaptive_reads_where_the_scene_moves(rec_path, integrate):
 def test_adaptive_reads_static_regions_rarely(rec_path):
     with open_recording(rec_path) as rec:
         m = get_method("adaptive_nedi_akf", tile_px=8)
-        for _ in m.reconstruct(rec, rec.gt_t):
+        for _ in m.reconstruct(rec, rec.gt.t):
             pass
     pol = m.last_policy
     # per-tile read counts: tiles are 8×8, the left 4 tile columns are static

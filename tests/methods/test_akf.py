@@ -3,7 +3,7 @@
 import numpy as np
 
 from simspad.methods.akf import AkfParams, AkfState, akf_events, akf_frames
-from simspad.methods.events_util import EventBatch
+from simspad.methods.event_batches import EventBatch
 from simspad.methods.windows import Measurement
 
 

@@ -5,7 +5,7 @@ import numpy as np
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
 from simspad.methods.edi import edi_deblur
-from simspad.methods.events_util import EventBatch
+from simspad.methods.event_batches import EventBatch
 from tests.helpers.synthetic_recordings import FRAME_ATTRS, write_recording
 
 
@@ -53,7 +53,7 @@ def test_edi_method_beats_plain_frames_on_a_moving_edge(tmp_path):
         times = np.array([0.002, 0.007])  # the two exposure centres
         gt = np.stack([flux(t) for t in times])
         edi = np.stack(list(get_method("edi").reconstruct(rec, times))).astype(np.float64)
-        dn = rec.frames_dn(slice(None)).astype(np.float64)
+        dn = rec.frames.dn(slice(None)).astype(np.float64)
     plain = (dn - FRAME_ATTRS["black_level_dn"]) / FRAME_ATTRS["gain_dn_per_e"] / (area * 4e-3)
     err_edi = np.sqrt(np.mean(np.log(edi / gt) ** 2))
     err_plain = np.sqrt(np.mean(np.log(np.maximum(plain, 1.0) / gt) ** 2))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simspad.methods.events_util import EventBatch
+from simspad.methods.event_batches import EventBatch
 from simspad.methods.nedi import nedi_deblur
 from simspad.methods.spad_response import estimate_flux, log_flux_variance
 

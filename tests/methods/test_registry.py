@@ -48,14 +48,14 @@ def test_missing_sensor_is_refused(tmp_path):
     with open_recording(path) as rec:
         assert available_methods(rec) == ["ni", "qbp"]
         with pytest.raises(InputError, match="events"):
-            get_method("nedi_akf").reconstruct(rec, rec.gt_t)
+            get_method("nedi_akf").reconstruct(rec, rec.gt.t)
 
 
 def test_all_methods_end_to_end(moving):
     with open_recording(moving) as rec:
-        times = rec.gt_t
-        gt = rec.gt_flux().astype(np.float64)
-        n_ev = rec.n_events
+        times = rec.gt.t
+        gt = rec.gt.flux().astype(np.float64)
+        n_ev = rec.events.n_events
         errs, bws = {}, {}
         for name in available_methods(rec):
             r = get_method(name).reconstruct(rec, times)
@@ -86,6 +86,6 @@ def test_all_methods_end_to_end(moving):
 
 def test_reconstruction_is_deterministic(moving):
     with open_recording(moving) as rec:
-        a = np.stack(list(get_method("adaptive_nedi_akf").reconstruct(rec, rec.gt_t)))
-        b = np.stack(list(get_method("adaptive_nedi_akf").reconstruct(rec, rec.gt_t)))
+        a = np.stack(list(get_method("adaptive_nedi_akf").reconstruct(rec, rec.gt.t)))
+        b = np.stack(list(get_method("adaptive_nedi_akf").reconstruct(rec, rec.gt.t)))
     assert np.array_equal(a, b)

@@ -29,9 +29,9 @@ def _run(tmp_path, times, frames, params, seed=0, lux=1000.0, t0=None, t1=None, 
     with RecordingWriter(path, {"width": tl.width, "height": tl.height, "duration_s": t1 - t0, "lux": lux}) as w:
         attrs = events.simulate_events(w, tl, t0, t1, params, np.random.default_rng(seed), lux, **kw)
     with open_recording(path) as rec:
-        ev = rec.events(t0, t1 + 1.0)
-        ev["ms_to_idx"] = rec.ms_to_idx.copy()
-        assert rec.n_events == ev["t"].size
+        ev = rec.events.window(t0, t1 + 1.0)
+        ev["ms_to_idx"] = rec.events.ms_to_idx.copy()
+        assert rec.events.n_events == ev["t"].size
     maps = events.draw_pixel_maps(params, (tl.height, tl.width), np.random.default_rng(seed))
     return ev, attrs, maps
 

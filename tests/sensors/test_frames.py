@@ -69,9 +69,9 @@ def test_simulate_frames_flat_field_statistics_and_attrs(tmp_path):
     assert expected_exposure < 1 / params.frame_rate_hz  # the full-well criterion binds, not the frame period
     assert attrs["exposure_s"] == pytest.approx(expected_exposure)
     with open_recording(tmp_path / "r.h5") as rec:
-        dn = rec.frames_dn().astype(np.float64)
-        t_start, t_end = rec.frames_t_start, rec.frames_t_end
-        fa = rec.frames_attrs
+        dn = rec.frames.dn().astype(np.float64)
+        t_start, t_end = rec.frames.t_start, rec.frames.t_end
+        fa = rec.frames.attrs
     assert dn.shape == (20, 24, 32)
     np.testing.assert_allclose(np.diff(t_start), 1 / params.frame_rate_hz)
     np.testing.assert_allclose(t_end - t_start, expected_exposure)
@@ -116,8 +116,8 @@ def test_rolling_shutter_recording_skews_rows_and_fits_the_readout(tmp_path):
     with RecordingWriter(tmp_path / "rs.h5", {"width": W, "height": H, "duration_s": 0.1, "lux": 1.0}) as w:
         attrs = frames.simulate_frames(w, ramp, 0.0, 0.1, params, np.random.default_rng(2))
     with open_recording(tmp_path / "rs.h5") as rec:
-        dn = rec.frames_dn().astype(np.float64)
-        t_start = rec.frames_t_start
+        dn = rec.frames.dn().astype(np.float64)
+        t_start = rec.frames.t_start
     assert attrs["shutter"] == "rolling" and attrs["readout_s"] == pytest.approx((H - 1) * line_s)
     assert t_start[-1] + 8e-3 + (H - 1) * line_s <= 0.1 + 1e-12  # every row of every frame inside the interval
     assert dn.shape[0] == 9  # a global shutter fits 10; the 10th frame's last rows would end after 0.1 s
@@ -138,7 +138,7 @@ def test_bayer_mosaic_follows_the_colour_of_the_scene(tmp_path):
     with RecordingWriter(tmp_path / "c.h5", {"width": 8, "height": 6, "duration_s": 0.05, "lux": 1.0}) as w:
         attrs = frames.simulate_frames(w, tl, 0.0, 0.05, params, np.random.default_rng(1))
     with open_recording(tmp_path / "c.h5") as rec:
-        dn = rec.frames_dn().astype(np.float64).mean(axis=0)
+        dn = rec.frames.dn().astype(np.float64).mean(axis=0)
     channel = frames.bayer_channel_map(6, 8)
     assert attrs["bayer_pattern"] == "RGGB" and attrs["rgb_source"] == "rgb"
     assert dn[channel == 0].mean() > params.black_level_dn + 100

@@ -59,34 +59,35 @@ def test_recording_layout_and_ground_truth(render_dir, tmp_path):
         json.loads(a["spec"])
         assert rec.sensors == ("spad", "frames", "events")
         # SPAD
-        sa = rec.spad_attrs
+        sa = rec.spad.attrs
         assert sa["gate_s"] != "auto" and 5.75e-9 <= sa["gate_s"] <= sa["bin_s"]
         assert np.isclose(sa["pixel_area_m2"], sa["pixel_pitch_m"] ** 2) and sa["lux"] == 10.0
-        n = rec.spad_n_bins
+        n = rec.spad.n_bins
         assert n == int((0.004 - sa["gate_s"]) / sa["bin_s"]) + 1
         assert rec.h5["spad/bits"].shape == (n, H, (W + 7) // 8) and rec.h5["spad/bits"].chunks[0] >= 1
-        assert np.allclose(rec.spad_t_start, np.arange(n) * sa["bin_s"])
-        assert rec.dcr_cps.shape == (H, W) and rec.dcr_cps.dtype == np.float32
+        assert np.allclose(rec.spad.t_start, np.arange(n) * sa["bin_s"])
+        assert rec.spad.dcr_cps.shape == (H, W) and rec.spad.dcr_cps.dtype == np.float32
         # ground truth: instantaneous flux at 1 kHz, lux convention on the first keyframe
-        assert np.allclose(rec.gt_t, [0.0, 0.001, 0.002, 0.003, 0.004])
+        assert np.allclose(rec.gt.t, [0.0, 0.001, 0.002, 0.003, 0.004])
         y0 = tl.keyframe(0)
         scale = flux_scale(float(np.mean(y0, dtype=np.float64)), 10.0, Optics())
-        gt = rec.gt_flux()
+        gt = rec.gt.flux()
         assert gt.shape == (5, H, W) and gt.dtype == np.float32
         assert np.allclose(gt[0], y0 * scale, rtol=1e-5)
         assert np.allclose(gt[2], tl.sample(0.002) * scale, rtol=1e-5)
-        assert np.allclose(rec.gt_depth(1), np.linspace(1, 2, W)[None].repeat(H, 0), rtol=1e-6)
-        assert np.allclose(rec.poses_t, TIMES) and rec.poses_camera_to_world.shape == (4, 4, 4)
+        assert np.allclose(rec.gt.depth(1), np.linspace(1, 2, W)[None].repeat(H, 0), rtol=1e-6)
+        assert np.allclose(rec.poses.t, TIMES) and rec.poses.camera_to_world.shape == (4, 4, 4)
         # the SPAD's counts follow the ground truth (same flux, same time base)
-        counts = rec.spad_counts(0, n)
+        counts = rec.spad.counts(0, n)
         q = sa["detection_area_m2"]
         g = sa["gate_s"]
         flux_tl = tl.scaled(scale)
-        p_bins = np.stack([-np.expm1(-(q * flux_tl.integrate(t, t + g) + rec.dcr_cps * g)) for t in rec.spad_t_start])
+        p_bins = np.stack([-np.expm1(-(q * flux_tl.integrate(t, t + g) + rec.spad.dcr_cps * g))
+                           for t in rec.spad.t_start])
         mu, var = p_bins.sum(), (p_bins * (1 - p_bins)).sum()
         secondary = (sa["afterpulsing_probability"] + 4 * sa["crosstalk_probability"]) * mu
         assert abs(counts.sum() - mu) < 5 * np.sqrt(var) + secondary
-        assert rec.n_frames == 4 and rec.has("events")
+        assert rec.frames.n_frames == 4 and rec.has("events")
 
 
 def test_determinism_same_seed_same_bytes(render_dir, tmp_path):
@@ -105,9 +106,9 @@ def test_fixed_gate_and_sensor_subset(render_dir, tmp_path):
     out = simulate_recording(render_dir, tmp_path / "s.h5", lux=1.0, sensors={"spad": _sensors(gate_s=1e-6)["spad"]},
                              start_s=0.001, duration_s=0.002)
     with open_recording(out) as rec:
-        assert rec.sensors == ("spad",) and rec.spad_attrs["gate_s"] == 1e-6 and not rec.spad_attrs["gate_auto"]
-        assert np.isclose(rec.spad_t_start[0], 0.001) and np.isclose(rec.duration_s, 0.002)
-        assert np.allclose(rec.gt_t, [0.001, 0.002, 0.003])
+        assert rec.sensors == ("spad",) and rec.spad.attrs["gate_s"] == 1e-6 and not rec.spad.attrs["gate_auto"]
+        assert np.isclose(rec.spad.t_start[0], 0.001) and np.isclose(rec.duration_s, 0.002)
+        assert np.allclose(rec.gt.t, [0.001, 0.002, 0.003])
 
 
 def test_parse_values_and_overrides():
@@ -167,7 +168,7 @@ def test_cli_process_writes_and_fails_cleanly(render_dir, tmp_path, simspad_cli)
                          "--out", out)
     assert ok.returncode == 0, ok.stderr
     with open_recording(out) as rec:
-        assert rec.spad_attrs["gate_s"] == 2e-6
+        assert rec.spad.attrs["gate_s"] == 2e-6
     _break("nan", render_dir)
     bad = simspad_cli.run("simulate", render_dir, "--lux", "2", "--sensors", "spad", "--out", tmp_path / "bad.h5")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "NaN" in bad.stderr

@@ -166,11 +166,11 @@ def test_auto_gate_flat_field(tmp_path, lux):
     with RecordingWriter(path, {"width": W, "height": H, "duration_s": 0.03, "lux": lux}) as w:
         attrs = simulate_spad(w, tl, 0.0, 0.03, p, np.random.default_rng(5))
     with open_recording(path) as rec:
-        gate = rec.spad_attrs["gate_s"]
-        dcr = rec.dcr_cps.astype(np.float64)
-        n = rec.spad_n_bins
-        counts = rec.spad_counts(0, n)
-        assert n == n_bins(0.03, BIN_S, gate) and np.allclose(rec.spad_t_start, np.arange(n) * BIN_S)
+        gate = rec.spad.attrs["gate_s"]
+        dcr = rec.spad.dcr_cps.astype(np.float64)
+        n = rec.spad.n_bins
+        counts = rec.spad.counts(0, n)
+        assert n == n_bins(0.03, BIN_S, gate) and np.allclose(rec.spad.t_start, np.arange(n) * BIN_S)
     rate = flux * p.detection_area_m2 + dcr
     assert attrs["gate_auto"] and gate == attrs["gate_s"]
     assert np.isclose(gate, auto_gate(rate, BIN_S, p.min_gate_s, 0.9))

@@ -1,6 +1,6 @@
 """Event stream helpers shared by the event-based methods.
 
-Events are read in time windows from a recording (``Recording.events(t0_s, t1_s)``, DESIGN §5: ``t`` int64 µs on
+Events are read in time windows from a recording (``rec.events.window(t0_s, t1_s)``, DESIGN §5: ``t`` int64 µs on
 the recording's time base, ``p`` 1 ON / 0 OFF) and turned into per-event log-irradiance increments
 ``dl = +threshold_on`` (ON) or ``−threshold_off`` (OFF): the nominal contrast thresholds of the sensor (DESIGN §7:
 "event contrast threshold c is the sensor's nominal one"). Noise labels are never used (real data has none).
@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+
+from simspad.errors import InputError
 
 
 @dataclass
@@ -53,9 +55,7 @@ class EventBatch:
 
 def event_thresholds(rec) -> tuple[float, float, float]:
     """Nominal (threshold_on, threshold_off, threshold_sigma) from the ``/events`` attrs."""
-    from simspad.errors import InputError
-
-    a = rec.events_attrs
+    a = rec.events.attrs
     try:
         c_on = float(a["threshold_on"])
         c_off = float(a.get("threshold_off", c_on))
@@ -91,7 +91,7 @@ class EventCursor:
             return EventBatch.empty(t0_s, t1_s)
         # A 1 µs margin each side, then an exact filter: the reader's own rounding can neither drop nor repeat
         # an event at a window edge.
-        ev = self.rec.events(max(t0_s - 1e-6, 0.0), t1_s + 1e-6)
+        ev = self.rec.events.window(max(t0_s - 1e-6, 0.0), t1_s + 1e-6)
         t = np.asarray(ev["t_us"] if "t_us" in ev else ev["t"], dtype=np.int64).astype(np.float64) * 1e-6
         keep = (t >= t0_s) & (t < t1_s)
         t = t[keep]

@@ -1,0 +1,16 @@
+"""``simspad snr``: draw the analytic SNR-versus-flux figure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from simspad.analysis.snr import plot_snr
+
+
+def snr_from_cli(out_path) -> Path:
+    """The ``simspad snr`` command."""
+    path = plot_snr(Path(out_path))
+    click.echo(f"wrote {path}")
+    return path

@@ -1,0 +1,73 @@
+"""``leaderboard.html``: one self-contained page (inline CSS, plots and strips as base64 PNG, no script and no
+external asset). Every user-supplied string (method names, labels, scenes, sensors, error messages) is escaped
+with :func:`html.escape`.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+
+from simspad.evaluate.leaderboard.board import DAGGER, Board, failed_runs, lux_levels
+from simspad.evaluate.leaderboard.tables import MTF_NOTE, lux_table, mtf_table, summary_cells, table_cells
+
+_CSS = """body{font-family:system-ui,Helvetica,Arial,sans-serif;margin:24px;color:#222;background:#fff}
+table{border-collapse:collapse;margin:12px 0;font-size:13px}th,td{border:1px solid #bbb;padding:4px 8px}
+th{background:#eef2f7}td.num{text-align:right;font-variant-numeric:tabular-nums}td.best{background:#d9f2d9;
+font-weight:bold}img{max-width:100%;border:1px solid #ddd;margin:6px 0}h1{font-size:22px}h2{font-size:17px;
+margin-top:28px}.note{color:#555;font-size:12px}.plots{display:flex;flex-wrap:wrap;gap:12px}
+.plots img{max-width:48%}"""
+
+
+def _html_table(header, body) -> str:
+    out = ["<table>", "<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>"]
+    for row in body:
+        cells = []
+        for j, (t, best) in enumerate(row):
+            cls = ("num" if j > 0 and _is_number(t) else "") + (" best" if best and t != "–" else "")
+            cells.append(f"<td class=\"{cls.strip()}\">{html.escape(t)}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return text == "–"
+    return True
+
+
+def _img_tag(png: bytes, alt: str) -> str:
+    return f"<img alt=\"{html.escape(alt)}\" src=\"data:image/png;base64,{base64.b64encode(png).decode()}\">"
+
+
+def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, bytes]]) -> str:
+    lheader, lbody = lux_table(board)
+    parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
+             "<title>SimSPAD leaderboard</title>", f"<style>{_CSS}</style></head><body>",
+             "<h1>SimSPAD leaderboard</h1>",
+             "<p class=\"note\">PSNR in dB (display-mapped: white point = 99th percentile of ground truth, sRGB "
+             f"curve; DESIGN §8). Best per column in bold. {DAGGER} scored after a per-frame least-squares "
+             "affine fit in log space (no absolute scale). Bandwidth: mean over recordings.</p>",
+             "<h2>Summary over all recordings</h2>", _html_table(*summary_cells(board)),
+             "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody),
+             "<h2>Methods × scenes at each light level (PSNR, dB)</h2>"]
+    for lux in lux_levels(board):
+        parts += [f"<h3>{lux:g} lx</h3>", _html_table(*table_cells(board, lux))]
+    mt = mtf_table(board)
+    if mt is not None:
+        parts += ["<h2>Siemens star: MTF50</h2>", f"<p class=\"note\">{html.escape(MTF_NOTE)}</p>", _html_table(*mt)]
+    parts.append("<h2>Plots</h2>")
+    parts.append("<div class=\"plots\">" + "".join(_img_tag(png, name) for name, png in plots.items()) + "</div>")
+    if strips:
+        parts.append("<h2>Reconstructions at the chosen instant (ground truth first)</h2>")
+        for title, png in strips:
+            parts.append(f"<h3>{html.escape(title)}</h3>{_img_tag(png, title)}")
+    errs = failed_runs(board)
+    if errs:
+        parts.append("<h2>Failed runs</h2><ul>" + "".join(
+            f"<li>{html.escape(m)}: {html.escape(e)}</li>" for m, e in errs) + "</ul>")
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"

@@ -1,0 +1,112 @@
+"""The leaderboard's tables: cells of (text, is_best) for the renderers, and ``leaderboard.csv``.
+
+Best value per column is marked: highest PSNR, SSIM and MTF50, lowest bandwidth. Texts are unescaped; the HTML and
+markdown renderers escape them.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from simspad.evaluate.leaderboard.board import (
+    Board,
+    best_of,
+    fmt_bandwidth,
+    fmt_number,
+    lux_levels,
+    lux_means,
+    mean_finite,
+    method_label,
+)
+
+
+def summary_cells(board: Board):
+    """The summary table: each method's bandwidth and mean PSNR / SSIM over all recordings."""
+    header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s", "Mean PSNR (dB)", "Mean SSIM"]
+    best = [best_of({m: board.info[m][k] for m in board.methods}, higher=h)
+            for k, h in (("bw_khz_mean", False), ("bw_bits_mean", False), ("psnr_mean", True), ("ssim_mean", True))]
+    body = []
+    for m in board.methods:
+        i = board.info[m]
+        body.append([(method_label(board, m), False), (i["sensors"], False),
+                     (fmt_bandwidth(i["bw_khz_mean"]), m in best[0]), (fmt_bandwidth(i["bw_bits_mean"]), m in best[1]),
+                     (fmt_number(i["psnr_mean"]), m in best[2]),
+                     (fmt_number(i["ssim_mean"], 3), m in best[3])])
+    return header, body
+
+
+def table_cells(board: Board, lux: float | None = None):
+    """Methods × scenes (PSNR, dB) with bandwidth, at one light level (``lux``) or over all (scene, lux) columns.
+
+    Cells are (text, is_best) with the text unescaped; best = highest PSNR, lowest bandwidth.
+    """
+    columns = [(s, l) for s, l in board.columns if lux is None or l == lux]
+    bw_key = "bw_khz_by_lux" if lux is not None else None
+
+    def bandwidth(m, kind):
+        i = board.info[m]
+        if lux is None:
+            return i["bw_khz_mean"] if kind == "khz" else i["bw_bits_mean"]
+        return mean_finite(i[bw_key if kind == "khz" else "bw_bits_by_lux"].get(lux, []))
+
+    def mean_psnr(m):
+        return mean_finite([board.psnr.get((m, s, l), float("nan")) for s, l in columns])
+
+    header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s"] + \
+        [s if lux is not None else f"{s} @ {l:g} lx" for s, l in columns] + ["Mean PSNR"]
+    best_cols = [best_of({m: board.psnr.get((m, s, l), float("nan")) for m in board.methods}) for s, l in columns]
+    best_bw = best_of({m: bandwidth(m, "khz") for m in board.methods}, higher=False)
+    best_bits = best_of({m: bandwidth(m, "bits") for m in board.methods}, higher=False)
+    best_mean = best_of({m: mean_psnr(m) for m in board.methods})
+    body = []
+    for m in board.methods:
+        cells = [(method_label(board, m), False), (board.info[m]["sensors"], False),
+                 (fmt_bandwidth(bandwidth(m, "khz")), m in best_bw),
+                 (fmt_bandwidth(bandwidth(m, "bits")), m in best_bits)]
+        cells += [(fmt_number(board.psnr.get((m, s, l), float("nan"))), m in best_cols[j])
+                  for j, (s, l) in enumerate(columns)]
+        cells.append((fmt_number(mean_psnr(m)), m in best_mean))
+        body.append(cells)
+    return header, body
+
+
+def lux_table(board: Board):
+    luxes = lux_levels(board)
+    means = lux_means(board)
+    best = [best_of({m: means[m][l] for m in board.methods}) for l in luxes]
+    header = ["Method"] + [f"{l:g} lx" for l in luxes]
+    body = [[(method_label(board, m), False)] + [(fmt_number(means[m][l]), m in best[j]) for j, l in enumerate(luxes)]
+            for m in board.methods]
+    return header, body
+
+
+def mtf_table(board: Board):
+    """MTF50 (cycles/px) of the Siemens-star recordings, or None when there are none."""
+    cols = sorted({(s, l) for _, s, l in board.mtf50})
+    if not cols:
+        return None
+    best = [best_of({m: board.mtf50.get((m, s, l), float("nan")) for m in board.methods}) for s, l in cols]
+    header = ["Method"] + [f"{s} @ {l:g} lx" for s, l in cols]
+    body = [[(method_label(board, m), False)] + [(fmt_number(board.mtf50.get((m, s, l), float("nan")), 3), m in best[j])
+                                           for j, (s, l) in enumerate(cols)] for m in board.methods]
+    return header, body
+
+
+MTF_NOTE = ("MTF50 in cycles per pixel relative to the ground truth (0.5 = stays above half contrast up to "
+            "Nyquist; – = already below 0.5 at the lowest measured frequency, or no star).")
+
+
+def write_csv_table(path: Path, board: Board) -> None:
+    cols = ["method", "label", "sensors", "absolute_scale", "bandwidth_khz_per_pixel",
+            "bandwidth_bits_per_pixel_s"] + [f"psnr_db[{s}@{l:g}lx]" for s, l in board.columns] + \
+        ["mean_psnr_db", "mean_ssim", "errors"]
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        for m in board.methods:
+            i = board.info[m]
+            w.writerow([m, i["label"], i["sensors"], "true" if i["absolute_scale"] else "false",
+                        i["bw_khz_mean"], i["bw_bits_mean"]] +
+                       [board.psnr.get((m, s, l), float("nan")) for s, l in board.columns] +
+                       [i["psnr_mean"], i["ssim_mean"], len(i["errors"])])

@@ -1,0 +1,110 @@
+"""The recordings to evaluate: a recording file, a dataset directory (``manifest.json``) or a directory of
+``.h5`` files, each named by a key (``<sequence>_<lux>lx``) in results and submissions.
+
+The manifest is read here with a looser check than :func:`simspad.io.manifest.read_manifest` (an object with a
+``recordings`` list whose entries have a ``path`` string): evaluation accepts any such manifest.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from simspad.errors import SimSpadError
+from simspad.io.manifest import MANIFEST_NAME
+from simspad.io.recording import open_recording
+from simspad.io.results_dir import recording_key
+
+
+@dataclass
+class RecordingEntry:
+    """A recording to evaluate: its path and the key naming it in results and submissions."""
+
+    path: Path
+    rel: str
+    sequence: str = ""
+    scene: str = ""
+    lux: float = float("nan")
+    key: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+def read_manifest(dataset_dir: Path) -> dict | None:
+    """The dataset's ``manifest.json`` (None when there is none); SimSpadError when it is malformed."""
+    path = dataset_dir / MANIFEST_NAME
+    if not path.is_file():
+        return None
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SimSpadError(f"not valid JSON ({exc})", path=path) from None
+    if not isinstance(manifest, dict) or not isinstance(manifest.get("recordings"), list):
+        raise SimSpadError("expected an object with a 'recordings' list", path=path, field="recordings")
+    return manifest
+
+
+def list_recordings(target: Path) -> tuple[list[RecordingEntry], dict | None]:
+    """The recordings of ``target`` (a ``.h5`` file, a dataset directory with ``manifest.json``, or a
+    directory of ``.h5`` files) and the manifest (or None). Manifest entries whose status is not
+    ``complete`` are skipped."""
+    target = Path(target)
+    if target.is_file():
+        return [RecordingEntry(target, target.name)], None
+    if not target.is_dir():
+        raise SimSpadError("no such recording file or dataset directory", path=target)
+    manifest = read_manifest(target)
+    entries = _manifest_entries(target, manifest) if manifest is not None else _found_entries(target)
+    if not entries:
+        raise SimSpadError("no complete recordings to evaluate", path=target)
+    return entries, manifest
+
+
+def _manifest_entries(target: Path, manifest: dict) -> list[RecordingEntry]:
+    entries = []
+    for i, r in enumerate(manifest["recordings"]):
+        if not isinstance(r, dict) or not isinstance(r.get("path"), str):
+            raise SimSpadError("each recording needs a 'path' string", path=target / MANIFEST_NAME,
+                               field=f"recordings[{i}].path")
+        if r.get("status", "complete") != "complete":
+            continue
+        entries.append(RecordingEntry(target / r["path"], r["path"], extra=r))
+    return entries
+
+
+def _found_entries(target: Path) -> list[RecordingEntry]:
+    """Every ``.h5`` below ``target`` except temporary files, saved reconstructions and render caches."""
+    entries = []
+    results_dirs = {d.parent for d in target.rglob("results.json")}
+    for p in sorted(target.rglob("*.h5")):
+        parts = p.relative_to(target).parts
+        if any(part.startswith(".") for part in parts):
+            continue  # temporary files of atomic writes
+        if any(parent in results_dirs for parent in p.parents) or "renders" in parts[:-1]:
+            continue  # saved reconstructions of an earlier evaluation, render caches
+        entries.append(RecordingEntry(p, p.relative_to(target).as_posix()))
+    return entries
+
+
+def fill_entry(entry: RecordingEntry) -> RecordingEntry:
+    """Read sequence, scene and lux from the recording's attributes (validating the file)."""
+    with open_recording(entry.path) as rec:
+        if not rec.has("gt"):
+            raise SimSpadError("recording has no ground truth (/gt): nothing to score against", path=entry.path,
+                               field="/gt")
+        entry.sequence = str(rec.attrs.get("sequence") or entry.extra.get("sequence") or rec.scene
+                             or Path(entry.rel).stem)
+        entry.scene = str(rec.scene or entry.extra.get("scene") or entry.sequence)
+        entry.lux = float(rec.lux)
+    entry.key = recording_key(entry.sequence, entry.lux)
+    return entry
+
+
+def spec_evaluation(manifest: dict | None, entry: RecordingEntry | None) -> dict:
+    """The ``evaluation`` table of the dataset spec (from the manifest, else from the recording; {} if none)."""
+    spec = (manifest or {}).get("spec")
+    if not isinstance(spec, dict) and entry is not None:
+        with open_recording(entry.path) as rec:
+            spec = rec.spec
+    ev = (spec or {}).get("evaluation", {}) if isinstance(spec, dict) else {}
+    return ev if isinstance(ev, dict) else {}

@@ -1,0 +1,77 @@
+"""The event stream of a recording (``/events``), read by time window through the millisecond index.
+
+Timestamps ``t`` are int64 µs on the recording's time base; ``ms_to_idx[k]`` is the index of the first event with
+``t ≥ 1000·k`` µs, so a window is found by reading one millisecond of timestamps at each end.
+"""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+
+from simspad.io.recording.group import GroupView
+
+#: Events per chunk of :meth:`EventsView.iter_chunks` by default.
+CHUNK_EVENTS = 1 << 20
+_FIELDS = ("t", "x", "y", "p")
+
+
+class EventsView(GroupView):
+    """``/events``: ``t`` (int64 µs), ``x``, ``y`` (uint16), ``p`` (1 ON / 0 OFF), ``label`` (uint8, optional)."""
+
+    def __init__(self, h5, path):
+        super().__init__(h5, path, "events")
+        self._ms_to_idx = None
+
+    @property
+    def n_events(self) -> int:
+        """Number of events."""
+        return int(self._dataset("t").shape[0])
+
+    @property
+    def ms_to_idx(self) -> np.ndarray:
+        """Index of the first event of each millisecond (int64; read once)."""
+        if self._ms_to_idx is None:
+            self._ms_to_idx = self._dataset("ms_to_idx")[()].astype(np.int64)
+        return self._ms_to_idx
+
+    def first_index_at(self, t_s: float) -> int:
+        """Index of the first event with timestamp ≥ ``t_s`` (µs resolution)."""
+        t_us = int(np.ceil(round(t_s * 1e6, 6)))
+        ms = t_us // 1000
+        idx = self.ms_to_idx
+        if ms < 0:
+            return 0
+        if ms >= len(idx) - 1:
+            lo, hi = int(idx[-1]) if len(idx) else 0, self.n_events
+        else:
+            lo, hi = int(idx[ms]), int(idx[ms + 1])
+        if lo >= hi:
+            return lo
+        t = self._h5["events/t"][lo:hi]
+        return lo + int(np.searchsorted(t, t_us, side="left"))
+
+    def index_range(self, t0_s: float, t1_s: float) -> tuple[int, int]:
+        """Index range of events with ``t0_s ≤ t < t1_s``."""
+        return self.first_index_at(t0_s), self.first_index_at(t1_s)
+
+    def by_index(self, i0: int, i1: int) -> dict[str, np.ndarray]:
+        """Events ``i0:i1`` as a dict of arrays (``label`` zeros when the recording has none)."""
+        g = self._h5["events"]
+        out = {k: g[k][i0:i1] for k in _FIELDS}
+        out["label"] = g["label"][i0:i1] if "label" in g else np.zeros(i1 - i0, np.uint8)
+        return out
+
+    def window(self, t0_s: float, t1_s: float) -> dict[str, np.ndarray]:
+        """Events with ``t0_s ≤ t < t1_s``: dict of ``t`` (int64 µs), ``x``, ``y`` (uint16), ``p``, ``label``
+        (uint8)."""
+        return self.by_index(*self.index_range(t0_s, t1_s))
+
+    def iter_chunks(self, chunk: int = CHUNK_EVENTS, t0_s: float | None = None,
+                    t1_s: float | None = None) -> Iterator[dict[str, np.ndarray]]:
+        """Yield events in time order, ``chunk`` at a time, optionally restricted to ``[t0_s, t1_s)``."""
+        i0 = 0 if t0_s is None else self.first_index_at(t0_s)
+        i1 = self.n_events if t1_s is None else self.first_index_at(t1_s)
+        for i in range(i0, i1, chunk):
+            yield self.by_index(i, min(i + chunk, i1))

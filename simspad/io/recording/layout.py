@@ -1,0 +1,33 @@
+"""The recording layout (DESIGN §5): format name and version, sensor groups, and what each group must hold.
+
+One HDF5 file per sequence × lux::
+
+    /             attrs: format, format_version, width, height, duration_s, lux, scene, sequence, spec, …
+    /gt           t [n] s, flux [n,H,W] ph s⁻¹ m⁻², depth [n,H,W] m (optional)
+    /poses        t [k] s, camera_to_world [k,4,4] (optional)
+    /spad         bits [n,H,ceil(W/8)] uint8 (little bit order), t_start [n] s, dcr_cps [H,W]
+    /frames       dn [k,H,W] uint16, t_start [k] s, t_end [k] s
+    /events       t [m] int64 µs, x, y [m] uint16, p [m] uint8 (1 ON / 0 OFF), label [m] uint8 (optional),
+                  ms_to_idx [ms] (index of the first event of each millisecond)
+"""
+
+FORMAT = "simspad-recording"
+FORMAT_VERSION = 1
+#: The sensor kinds, in the order their groups are listed; every layer takes the names from here.
+SENSOR_KINDS = ("spad", "frames", "events")
+
+#: Root attributes every recording has.
+REQUIRED_ROOT_ATTRS = ("width", "height", "duration_s", "lux")
+#: Datasets a group must hold when the group is present.
+REQUIRED_DATASETS = {
+    "gt": ("gt/t", "gt/flux"),
+    "spad": ("spad/bits", "spad/t_start", "spad/dcr_cps"),
+    "frames": ("frames/dn", "frames/t_start", "frames/t_end"),
+    "events": ("events/t", "events/x", "events/y", "events/p", "events/ms_to_idx"),
+}
+#: Attributes a sensor group must carry when the group is present.
+REQUIRED_GROUP_ATTRS = {
+    "spad": ("bin_s", "gate_s", "pixel_pitch_m", "fill_factor", "qe"),
+    "frames": ("gain_dn_per_e", "black_level_dn", "bit_depth", "qe", "pixel_pitch_m", "fill_factor"),
+    "events": ("threshold_on", "threshold_off"),
+}

@@ -1,0 +1,55 @@
+"""The SPAD stream of a recording (``/spad``): packed binary frames, their start times, the dark count map."""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+
+from simspad.io.recording.group import GroupView
+
+#: Binary frames read per chunk by default (bounded memory whatever the recording length).
+CHUNK_BINS = 1024
+
+
+class SpadView(GroupView):
+    """``/spad``: binary frames stored 8 pixels a byte along x (little bit order), read in chunks."""
+
+    def __init__(self, h5, path, width: int, height: int):
+        super().__init__(h5, path, "spad")
+        self._width = width
+        self._height = height
+
+    @property
+    def t_start(self) -> np.ndarray:
+        """Start time of every binary frame, s."""
+        return self._dataset("t_start")[()]
+
+    @property
+    def n_bins(self) -> int:
+        """Number of binary frames."""
+        return int(self._dataset("bits").shape[0])
+
+    @property
+    def dcr_cps(self) -> np.ndarray:
+        """Dark count rate map, counts s⁻¹."""
+        return self._dataset("dcr_cps")[()]
+
+    def bits(self, start: int, stop: int) -> np.ndarray:
+        """Binary frames ``start:stop`` unpacked to ``[n,H,W]`` uint8 (0/1)."""
+        packed = self._dataset("bits")[start:stop]
+        return np.unpackbits(packed, axis=2, count=self._width, bitorder="little")
+
+    def iter_bits(self, start: int = 0, stop: int | None = None,
+                  chunk: int = CHUNK_BINS) -> Iterator[tuple[int, np.ndarray]]:
+        """Yield ``(first_index, bits[n,H,W])`` over ``start:stop`` in chunks of ``chunk`` frames."""
+        stop = self.n_bins if stop is None else min(stop, self.n_bins)
+        for i in range(start, stop, chunk):
+            yield i, self.bits(i, min(i + chunk, stop))
+
+    def counts(self, start: int, stop: int, chunk: int = CHUNK_BINS) -> np.ndarray:
+        """Number of ones per pixel over binary frames ``start:stop`` (``[H,W]`` int32), read in chunks."""
+        total = np.zeros((self._height, self._width), np.int32)
+        for _, bits in self.iter_bits(start, stop, chunk):
+            total += bits.sum(axis=0, dtype=np.int32)
+        return total
