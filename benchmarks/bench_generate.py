@@ -38,9 +38,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from simspad.dataset.executors import default_workers, job_environment  # noqa: E402
-from simspad.dataset.jobs import generate, make_plan  # noqa: E402
-from simspad.dataset.spec import load_spec, spec_from_dict  # noqa: E402
+from simspad.dataset.executors import ExecutorConfig, default_workers, job_environment  # noqa: E402
+from simspad.dataset.generate import generate  # noqa: E402
+from simspad.dataset.plan import make_plan  # noqa: E402
+from simspad.dataset.spec_validation import load_spec, spec_from_dict  # noqa: E402
 from simspad.io.manifest import read_manifest  # noqa: E402
 
 GIB = 1024**3
@@ -91,7 +92,7 @@ def part_ratio(spec, tmp: Path, executor_wall_s: float | None, subset: bool) -> 
     print(f"\n[2] executor vs naive loop: {len(spec.sequences)} sequences × {len(spec.lux)} lux = {n} recordings")
     if subset or executor_wall_s is None:
         t0 = time.perf_counter()
-        generate(spec, tmp / "executor", executor="local", progress=False, created_utc="2025-01-01T00:00:00Z")
+        generate(spec, tmp / "executor", executor=ExecutorConfig("local"), progress=False, created_utc="2025-01-01T00:00:00Z")
         executor_wall_s = time.perf_counter() - t0
     t_naive = naive_generate(spec, tmp / "naive")
     print(f"    naive in-process loop        {t_naive:8.1f} s")
@@ -105,7 +106,7 @@ def part_mini(spec, tmp: Path) -> Path:
           f"recordings, local executor, {default_workers()} cores")
     out = tmp / "mini"
     t0 = time.perf_counter()
-    res = generate(spec, out, executor="local", progress=False, result=True)
+    res = generate(spec, out, executor=ExecutorConfig("local"), progress=False)
     wall = time.perf_counter() - t0
     part_mini.wall_s = wall
     m = read_manifest(out)

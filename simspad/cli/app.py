@@ -90,7 +90,7 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
 def generate(spec, out_dir, executor, scheduler, workers):
     """Generate a dataset from SPEC (default: the embedded datasets/mini.toml)."""
-    from simspad.dataset.jobs import generate_from_cli
+    from simspad.cli.generate import generate_from_cli
 
     generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers)
 

@@ -50,7 +50,7 @@ def describe(path) -> str:
             from simspad.cli.describe_trajectory import describe_trajectory
 
             return describe_trajectory(path)
-        from simspad.dataset.spec import describe_spec
+        from simspad.cli.describe_spec import describe_spec
 
         return describe_spec(path)
     if suffix in _TRAJECTORY_SUFFIXES:

@@ -6,7 +6,7 @@ environment (``DRJIT_LIBLLVM_PATH``) before Mitsuba is imported, choose the Mits
 write their output atomically, and never raise: they return a dict with ``ok`` and either results or a one-line
 ``error``, so an exception that does not pickle cannot hang the job.
 
-Executors expose one small interface used by :mod:`simspad.dataset.jobs`:
+Executors expose one small interface used by :mod:`simspad.dataset.generate`:
 ``submit_render(task)``, ``submit_simulation(task)``, ``wait(futures) -> done``, ``result(future)``,
 ``sim_slots(renders_running)`` (how many simulations may run now) and ``close()``.
 """
@@ -16,16 +16,23 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import ctypes
+import json
 import multiprocessing
 import os
 import signal
 import socket
 import time
 import traceback
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from simspad.errors import SimSpadError
+from simspad.io.atomic import atomic_path
+from simspad.io.hashing import file_sha256
+from simspad.render.renderer import render_sequence, select_variant
+from simspad.sensors.presets import SpadParams
+from simspad.sensors.simulate import simulate_recording
 
 #: Environment variables forwarded to workers (set before Mitsuba/Dr.Jit is imported there): the same libLLVM
 #: and variant everywhere, so renders are bit-identical whichever worker runs them.
@@ -66,11 +73,9 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         _apply_environment(env)
-        from simspad.io.atomic import atomic_path
-        from simspad.render.renderer import render_sequence, select_variant
-        from simspad.sensors.presets import SpadParams
-
-        select_variant()  # the variant is per process: set it inside the worker, never inherit it
+        # Mitsuba loads here, after the job's libLLVM path is set; the variant is per process: set it inside the
+        # worker, never inherit it.
+        select_variant()
         seq = task.sequence
         final = Path(out_dir) / task.rel_dir
         if not (final / "timeline.json").is_file():
@@ -86,8 +91,6 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
 
 
 def _count_keyframes(render_dir: Path) -> int | None:
-    import json
-
     try:
         return len(json.loads((render_dir / "timeline.json").read_text())["keyframes"])
     except (OSError, ValueError, KeyError, TypeError):
@@ -105,9 +108,6 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         _apply_environment(env)
-        from simspad.io.manifest import file_sha256
-        from simspad.sensors.simulate import simulate_recording
-
         out_path = Path(out_dir) / task.rel_path
         simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, lux=task.lux, sensors=dict(task.sensors),
                            start_s=task.start_s, duration_s=task.duration_s, seed=task.seed,
@@ -217,7 +217,10 @@ class DaskExecutor:
 
     def __init__(self, out_dir: Path, env: dict[str, str], scheduler: str | None = None, workers: int | None = None):
         try:
-            from distributed import Client, LocalCluster
+            from distributed import (  # deferred: dask is needed only by --executor dask
+                Client,
+                LocalCluster,
+            )
         except ImportError:  # pragma: no cover - dask[distributed] is a dependency
             raise SimSpadError("the dask executor needs dask.distributed (pip install 'dask[distributed]')") from None
         self.out_dir = str(out_dir)
@@ -255,7 +258,7 @@ class DaskExecutor:
 
     @staticmethod
     def wait(futures):
-        from distributed import wait
+        from distributed import wait  # deferred: dask is needed only by --executor dask
 
         try:
             done, _ = wait(list(futures), timeout=1.0, return_when="FIRST_COMPLETED")
@@ -278,22 +281,40 @@ class DaskExecutor:
                 self._cluster.close()
 
 
-def check_executor_options(kind: str, scheduler: str | None, workers: int | None) -> None:
-    """:class:`SimSpadError` for an unknown executor, ``--scheduler`` without dask, or ``--workers`` < 1."""
-    if kind not in ("local", "dask"):
-        raise SimSpadError(f"unknown executor {kind!r} (expected local or dask)", field="--executor")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise SimSpadError(f"must be an integer ≥ 1, got {workers!r}", field="--workers")
-    if scheduler and kind != "dask":
-        raise SimSpadError("--scheduler needs --executor dask", field="--scheduler")
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """Where dataset work runs.
+
+    Attributes
+    ----------
+    kind : {"local", "dask"}
+        Local worker processes, or a Dask cluster.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``); none with ``kind="dask"`` starts a LocalCluster.
+    workers : int, optional
+        Simulation processes (local) or LocalCluster workers (dask); default: the usable core count.
+    """
+
+    kind: str = "local"
+    scheduler: str | None = None
+    workers: int | None = None
+
+    def check(self) -> None:
+        """:class:`SimSpadError` for an unknown executor, ``--scheduler`` without dask, or ``--workers`` < 1."""
+        if self.kind not in ("local", "dask"):
+            raise SimSpadError(f"unknown executor {self.kind!r} (expected local or dask)", field="--executor")
+        workers = self.workers
+        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+            raise SimSpadError(f"must be an integer ≥ 1, got {workers!r}", field="--workers")
+        if self.scheduler and self.kind != "dask":
+            raise SimSpadError("--scheduler needs --executor dask", field="--scheduler")
 
 
-def make_executor(kind: str, out_dir: Path, *, scheduler: str | None = None, workers: int | None = None,
-                  render_mp_spp: float = 0.0):
-    """The executor named ``kind`` (``"local"`` or ``"dask"``); ``render_mp_spp`` is the largest per-keyframe
-    render work (megapixels × spp) of the job, which decides whether renders may run side by side."""
-    check_executor_options(kind, scheduler, workers)
+def make_executor(config: ExecutorConfig, out_dir: Path, *, render_mp_spp: float = 0.0):
+    """The executor ``config`` names; ``render_mp_spp`` is the largest per-keyframe render work (megapixels × spp)
+    of the job, which decides whether renders may run side by side."""
+    config.check()
     env = job_environment()
-    if kind == "local":
-        return LocalExecutor(out_dir, env, workers, small_renders=render_mp_spp <= SMALL_RENDER_MP_SPP)
-    return DaskExecutor(out_dir, env, scheduler, workers)
+    if config.kind == "local":
+        return LocalExecutor(out_dir, env, config.workers, small_renders=render_mp_spp <= SMALL_RENDER_MP_SPP)
+    return DaskExecutor(out_dir, env, config.scheduler, config.workers)

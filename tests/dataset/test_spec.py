@@ -9,14 +9,9 @@ from pathlib import Path
 import pytest
 
 from simspad.cli import main
-from simspad.dataset.spec import (
-    DatasetSpec,
-    EvaluationSpec,
-    default_spec_path,
-    load_spec,
-    sequence_hash,
-    spec_hash,
-)
+from simspad.dataset.spec import DatasetSpec, EvaluationSpec, default_spec_path
+from simspad.dataset.spec_hashing import sequence_hash, spec_hash
+from simspad.dataset.spec_validation import load_spec
 from simspad.errors import SpecError
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams
 

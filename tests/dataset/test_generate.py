@@ -15,8 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from simspad.dataset.jobs import DatasetLock, generate, recording_rel_path
-from simspad.dataset.spec import load_spec
+from simspad.dataset.directory import DatasetLock, recording_rel_path
+from simspad.dataset.executors import ExecutorConfig
+from simspad.dataset.generate import generate
+from simspad.dataset.spec_validation import load_spec
 from simspad.errors import InputError, SimSpadError
 from simspad.io.manifest import content_sha256, file_sha256, read_manifest
 
@@ -85,8 +87,7 @@ def tiny(tmp_path_factory):
     root = tmp_path_factory.mktemp("jobs")
     spec_path = _write_spec(root / "tiny.toml")
     out = root / "local"
-    res = generate(load_spec(spec_path), out, executor="local", workers=2, progress=False, created_utc=CREATED,
-                   result=True)
+    res = generate(load_spec(spec_path), out, ExecutorConfig("local", workers=2), progress=False, created_utc=CREATED)
     return root, spec_path, out, res
 
 
@@ -120,7 +121,7 @@ def test_generate_writes_complete_dataset(tiny):
 def test_rerun_is_a_no_op(tiny):
     root, spec_path, out, _ = tiny
     before = {e["path"]: _stat(out, e["path"]) for e in read_manifest(out)["recordings"]}
-    res = generate(load_spec(spec_path), out, workers=1, progress=False, result=True)
+    res = generate(load_spec(spec_path), out, ExecutorConfig("local", workers=1), progress=False)
     assert not res.done and len(res.skipped) == 4 and not res.renders_done
     assert {p: _stat(out, p) for p in before} == before
 
@@ -135,7 +136,7 @@ def test_dask_is_identical_to_local(tiny):
     local = {e["path"]: e["sha256"] for e in read_manifest(out)["recordings"]}
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                       silence_logs=40) as cluster:
-        generate(load_spec(spec_path), root / "dask", executor="dask", scheduler=cluster.scheduler_address,
+        generate(load_spec(spec_path), root / "dask", ExecutorConfig("dask", scheduler=cluster.scheduler_address),
                  progress=False, created_utc=CREATED)
     m = read_manifest(root / "dask")
     assert [e["path"] for e in m["recordings"]] == list(local)
@@ -147,7 +148,7 @@ def test_dask_is_identical_to_local(tiny):
         assert content_sha256(root / "dask" / e["path"]) == content_sha256(out / e["path"])
     assert _renders_digest(root / "dask") == _renders_digest(out)
     with pytest.raises(SimSpadError, match="--scheduler"):
-        generate(load_spec(spec_path), root / "bad", executor="local", scheduler="tcp://127.0.0.1:1", progress=False)
+        generate(load_spec(spec_path), root / "bad", ExecutorConfig("local", scheduler="tcp://127.0.0.1:1"), progress=False)
 
 
 def test_concurrent_run_is_refused(tiny, simspad_cli):
@@ -169,7 +170,7 @@ def test_spec_change_redoes_only_what_changed(tiny):
     before = {e["path"]: (_stat(changed, e["path"]), e["sha256"]) for e in read_manifest(changed)["recordings"]}
     # Sequence b renders with more samples; the 100 lx level becomes 1000 lx.
     spec2 = load_spec(_write_spec(root / "changed.toml", lux=(1, 1000), spp_b=4))
-    res = generate(spec2, changed, executor="dask", workers=2, progress=False, result=True)
+    res = generate(spec2, changed, ExecutorConfig("dask", workers=2), progress=False)
     assert sorted(res.skipped) == ["recordings/a/a_1lx.h5"]
     assert sorted(res.done) == ["recordings/a/a_1000lx.h5", "recordings/b/b_1000lx.h5", "recordings/b/b_1lx.h5"]
     assert [Path(r).name.rsplit("-", 1)[0] for r in res.renders_done] == ["b"]
@@ -221,7 +222,7 @@ def test_resume_after_kill_9(tiny, simspad_cli):
                 "zombie" not in Path(f"/proc/{w}/status").read_text().lower()]
     kept = {rel: _stat(target, rel) for rel in complete}
 
-    res = generate(load_spec(spec_path), target, workers=2, progress=False, result=True)
+    res = generate(load_spec(spec_path), target, ExecutorConfig("local", workers=2), progress=False)
     m = read_manifest(target)
     assert all(e["status"] == "complete" for e in m["recordings"]) and len(m["recordings"]) == 8
     assert set(complete) <= set(res.skipped) and len(res.done) + len(res.skipped) == 8
@@ -240,7 +241,7 @@ def test_corrupted_recording_is_redone_and_foreign_manifest_refused(tiny):
     with open(victim, "r+b") as f:  # same size, different bytes
         f.seek(100)
         f.write(b"\xff" * 8)
-    res = generate(load_spec(spec_path), work, workers=1, progress=False, result=True)
+    res = generate(load_spec(spec_path), work, ExecutorConfig("local", workers=1), progress=False)
     assert res.done == ["recordings/a/a_1lx.h5"] and file_sha256(victim) == sha
 
     foreign = root / "foreign"

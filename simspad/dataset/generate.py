@@ -1,0 +1,248 @@
+"""Dataset generation (``simspad generate``): render each sequence once, simulate every sequence × lux.
+
+The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`): one render per sequence
+(shared by all lux levels and sensors) into ``<out>/renders/<sequence>-<hash>/``, then one simulation per
+(sequence, lux) into ``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. The driver (this module, in the
+calling process,
+with :mod:`~simspad.dataset.manifest_state`) is the only writer of ``manifest.json``, which it rewrites atomically as results arrive.
+
+Determinism: every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key
+``(sequence, lux)``), every render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same
+whatever the executor, the worker count or the order: byte for byte (the renderer loads scenes with a
+canonical emitter order and the recording writer's HDF5 layout depends only on the data). The recordings'
+``created_utc`` attr is the dataset's creation time kept in the manifest (or ``$SOURCE_DATE_EPOCH``, or the
+``created_utc`` argument), not the wall-clock time of each write, so re-running or resuming does not change any
+file's bytes; two separate datasets from one spec differ only in that attr unless ``SOURCE_DATE_EPOCH`` pins it.
+
+Resume: a recording is skipped when its manifest entry is complete, its ``recording_hash`` (a hash of
+everything that affects that file) is unchanged, and the file's size and sha256 match. Temporary files of a
+killed run are removed on the next run (the lock guarantees no one else is writing them). A lock
+(``fcntl.flock`` on ``<out>/.simspad.lock``) refuses a second concurrent run on one output directory.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from tqdm import tqdm
+
+from simspad.dataset.directory import RENDERS_DIR, DatasetLock, remove_temporaries
+from simspad.dataset.executors import ExecutorConfig, make_executor
+from simspad.dataset.manifest_state import (
+    ManifestState,
+    dataset_created_utc,
+    load_previous_manifest,
+)
+from simspad.dataset.plan import Plan, RecordingTask, RenderTask, make_plan
+from simspad.dataset.spec import DatasetSpec
+from simspad.dataset.spec_validation import load_spec
+from simspad.errors import SimSpadError
+from simspad.io.atomic import ensure_writable_dir
+from simspad.io.manifest import recording_is_complete
+
+
+@dataclass
+class GenerateResult:
+    """What :func:`generate` did: the dataset folder and the per-recording outcome."""
+
+    out_dir: Path
+    manifest: dict
+    done: list[str]          # recordings (re)generated in this run
+    skipped: list[str]       # recordings already complete
+    failed: list[str]
+    renders_done: list[str]
+    wall_s: float
+    executor: str            # how it ran, in words
+
+
+def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *, progress: bool = True,
+             created_utc: str | None = None, log: Callable[[str], None] | None = None,
+             check: bool = True) -> GenerateResult:
+    """Generate (or finish) a dataset.
+
+    Parameters
+    ----------
+    spec : DatasetSpec or str or Path
+        The validated spec, or the path of a spec TOML.
+    out_dir : str or Path, optional
+        Dataset folder (default ``spec.output``).
+    executor : ExecutorConfig
+        Where the work runs: ``local`` processes or a ``dask`` cluster, its scheduler address and worker count
+        (default: local, one simulation process per usable core).
+    progress : bool
+        Show tqdm progress bars on stderr.
+    created_utc : str, optional
+        The ``created_utc`` of a new dataset (default ``$SOURCE_DATE_EPOCH``, else the manifest's, else now).
+    log : callable, optional
+        Receives one-line notices (default: print to stderr when ``progress``).
+    check : bool
+        Raise :class:`SimSpadError` if any recording failed (after the manifest records why).
+
+    Returns
+    -------
+    GenerateResult
+        The dataset folder (``out_dir``, holding ``manifest.json``) and what this run did.
+
+    Raises
+    ------
+    SimSpadError
+        Bad spec, a concurrent run on ``out_dir``, or recordings that failed (listed in the manifest).
+    """
+    t_start = time.perf_counter()
+    executor.check()
+    if not isinstance(spec, DatasetSpec):
+        spec = load_spec(spec)
+    out_dir = Path(out_dir if out_dir is not None else spec.output).expanduser().resolve()
+    if log is None:
+        log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
+    ensure_writable_dir(out_dir, what="dataset output")
+    with DatasetLock(out_dir):
+        for p in remove_temporaries(out_dir):
+            log(f"removed temporary {p.relative_to(out_dir)} left by an interrupted run")
+        previous = load_previous_manifest(out_dir)
+        created = dataset_created_utc(previous, created_utc)
+        plan = make_plan(spec, created)
+        manifest = ManifestState(out_dir, spec, plan, created, previous)
+        _remove_obsolete(out_dir, manifest, log)
+        outcome = _run(out_dir, plan, manifest, executor, progress, log)
+    outcome.wall_s = time.perf_counter() - t_start
+    if check:
+        raise_for_failures(outcome)
+    return outcome
+
+
+def raise_for_failures(outcome: "GenerateResult") -> None:
+    """:class:`SimSpadError` naming the first failed recording, if any failed."""
+    if not outcome.failed:
+        return
+    entries = {e["path"]: e for e in outcome.manifest["recordings"]}
+    first = entries[outcome.failed[0]]
+    raise SimSpadError(f"{len(outcome.failed)} of {len(entries)} recordings failed; first: {first['path']}: "
+                       f"{first.get('error', 'unknown error')} (details in manifest.json; re-run to retry)",
+                       path=outcome.out_dir)
+
+
+def _remove_obsolete(out_dir: Path, manifest: ManifestState, log) -> None:
+    """Recordings and renders of the previous manifest that the new spec no longer has are deleted, so the
+    folder holds exactly the dataset its manifest describes."""
+    for rel in manifest.obsolete_recordings:
+        p = out_dir / rel
+        if p.is_file():
+            p.unlink()
+            log(f"removed {rel} (no longer in the spec)")
+    for rel in manifest.obsolete_renders:
+        p = out_dir / rel
+        if rel and p.is_dir() and p.parent == out_dir / RENDERS_DIR:
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorConfig, progress, log):
+    # Which recordings are already there (verified: hash of the spec inputs and sha256 of the bytes)?
+    todo, skipped = [], []
+    for task in plan.recordings:
+        entry = manifest.rec[task.rel_path]
+        if recording_is_complete(out_dir, entry, task.recording_hash):
+            skipped.append(task.rel_path)
+        else:
+            if entry["status"] == "complete":
+                log(f"redoing {task.rel_path}: file missing or changed since it was written")
+            entry.update(status="pending", size=None, sha256=None, timings={})
+            entry.pop("error", None)
+            todo.append(task)
+    needed = {t.render_rel_dir for t in todo}
+    renders = [r for r in plan.renders if r.rel_dir in needed and not (out_dir / r.rel_dir / "timeline.json").is_file()]
+    for r in plan.renders:
+        if r.rel_dir in needed and r not in renders:
+            manifest.ren[r.rel_dir]["status"] = "complete"
+    for r in renders:
+        manifest.ren[r.rel_dir].update(status="pending", n_keyframes=None, timings={})
+    manifest.save()
+    outcome = GenerateResult(out_dir, manifest.data, [], skipped, [], [], 0.0, executor.kind)
+    if skipped:
+        log(f"{len(skipped)} of {len(plan.recordings)} recordings already complete")
+    if not todo:
+        return outcome
+
+    render_mp_spp = max((r.sequence.resolution[0] * r.sequence.resolution[1] * r.sequence.spp / 1e6
+                         for r in renders), default=0.0)
+    ex = make_executor(executor, out_dir, render_mp_spp=render_mp_spp)
+    outcome.executor = ex.describe()
+    bar_r = tqdm(total=len(renders), desc="renders", unit="seq", disable=not progress or not renders, position=0,
+                 leave=True, dynamic_ncols=True)
+    bar_s = tqdm(total=len(todo), desc="recordings", unit="rec", disable=not progress, position=1, leave=True,
+                 dynamic_ncols=True)
+    render_times = {r.rel_dir: manifest.ren[r.rel_dir].get("timings", {}).get("render_s") for r in plan.renders}
+    waiting = {}  # render rel_dir -> [RecordingTask] waiting for that render
+    ready = []    # simulations whose render exists, not yet submitted
+    for task in todo:
+        if any(r.rel_dir == task.render_rel_dir for r in renders):
+            waiting.setdefault(task.render_rel_dir, []).append(task)
+        else:
+            ready.append(task)
+    running: dict[Any, tuple[str, Any]] = {}
+    clean_exit = False
+    try:
+        for r in renders:
+            running[ex.submit_render(r)] = ("render", r)
+        while running or ready:
+            renders_running = sum(1 for kind, _ in running.values() if kind == "render")
+            sims_running = len(running) - renders_running
+            while ready and sims_running < ex.sim_slots(renders_running):
+                task = ready.pop(0)
+                running[ex.submit_simulation(task)] = ("sim", task)
+                sims_running += 1
+            for fut in ex.wait(list(running)):
+                kind, task = running.pop(fut)
+                res = ex.result(fut)
+                if kind == "render":
+                    _render_done(manifest, task, res, waiting, ready, outcome, render_times, bar_s, log)
+                    bar_r.update(1)
+                else:
+                    _simulation_done(manifest, task, res, render_times, outcome, log)
+                    bar_s.update(1)
+                manifest.save()
+        clean_exit = True
+    finally:
+        bar_r.close()
+        bar_s.close()
+        ex.close(cancel=not clean_exit)
+    return outcome
+
+
+def _render_done(manifest, task: RenderTask, res, waiting, ready, outcome, render_times, bar_s, log) -> None:
+    entry = manifest.ren[task.rel_dir]
+    entry["timings"] = {"render_s": round(res.get("seconds", 0.0), 3), "host": res.get("host")}
+    dependants = waiting.pop(task.rel_dir, [])
+    if res.get("ok"):
+        entry.update(status="complete", n_keyframes=res.get("n_keyframes"))
+        render_times[task.rel_dir] = entry["timings"]["render_s"]
+        outcome.renders_done.append(task.rel_dir)
+        ready.extend(dependants)
+        return
+    entry.update(status="failed", error=res.get("error"))
+    log(f"render of {task.sequence.name} failed: {res.get('error')}")
+    for rec in dependants:
+        manifest.rec[rec.rel_path].update(status="failed", error=f"render failed: {res.get('error')}")
+        outcome.failed.append(rec.rel_path)
+        bar_s.update(1)
+
+
+def _simulation_done(manifest, task: RecordingTask, res, render_times, outcome, log) -> None:
+    entry = manifest.rec[task.rel_path]
+    timings = {"simulate_s": round(res.get("seconds", 0.0), 3), "host": res.get("host")}
+    if render_times.get(task.render_rel_dir) is not None:
+        timings["render_s_shared"] = render_times[task.render_rel_dir]
+    entry["timings"] = timings
+    if res.get("ok"):
+        entry.update(status="complete", size=res["size"], sha256=res["sha256"])
+        entry.pop("error", None)
+        outcome.done.append(task.rel_path)
+    else:
+        entry.update(status="failed", error=res.get("error"))
+        outcome.failed.append(task.rel_path)
+        log(f"{task.rel_path} failed: {res.get('error')}")

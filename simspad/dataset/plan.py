@@ -1,0 +1,118 @@
+"""The job plan: every render and recording a spec asks for, with the seeds and hashes that make it reproducible.
+
+One render per sequence (shared by all lux levels and sensors), one simulation per (sequence, lux). Every
+recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key ``(sequence, lux)``), every render
+from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same whatever the executor, the worker count
+or the order. Each task carries a hash of everything its output depends on (spec content, scene and trajectory
+bytes, package versions, :data:`JOB_SCHEME_VERSION`), which decides on a re-run whether it must be redone.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+from simspad import __version__
+from simspad.dataset.directory import RENDERS_DIR, recording_rel_path
+from simspad.dataset.spec_hashing import canonical_json, sequence_hash, spec_hash
+from simspad.physics.radiometry import Optics
+from simspad.physics.seeding import child_seed
+from simspad.scenes.library import resolve_scene
+
+#: Bump when the job's output for an unchanged spec would change (part of every recording and render hash).
+JOB_SCHEME_VERSION = 1
+
+
+@dataclass(frozen=True)
+class RenderTask:
+    """One render: a sequence into ``<out>/<rel_dir>`` with Monte Carlo seed ``seed``."""
+
+    sequence: Any  # simspad.dataset.spec.SequenceSpec
+    render_hash: str
+    rel_dir: str
+    seed: int
+
+
+@dataclass(frozen=True)
+class RecordingTask:
+    """One simulation: a (sequence, lux) recording at ``<out>/<rel_path>`` from the render ``render_rel_dir``."""
+
+    sequence_name: str
+    scene: str
+    lux: float
+    rel_path: str
+    render_rel_dir: str
+    recording_hash: str
+    sensors: tuple  # ((kind, params dataclass), ...)
+    start_s: float
+    duration_s: float
+    seed: int
+    stream_key: tuple
+    gt_rate_hz: float
+    optics: Any  # simspad.physics.radiometry.Optics
+    metadata: tuple  # ((key, value), ...): root attrs of the recording
+
+
+@dataclass(frozen=True)
+class Plan:
+    renders: tuple[RenderTask, ...]
+    recordings: tuple[RecordingTask, ...]
+
+
+
+def _versions() -> dict[str, str]:
+    out = {"simspad": __version__, "job_scheme": str(JOB_SCHEME_VERSION)}
+    for pkg in ("mitsuba", "numpy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "absent"
+    return out
+
+
+def _render_seed(dataset_seed: int, sequence_name: str) -> int:
+    return int(child_seed(dataset_seed, sequence_name, "render").generate_state(1)[0])
+
+
+def scene_name(scene: str) -> str:
+    return resolve_scene(scene).name
+
+
+def make_plan(spec, created_utc: str) -> Plan:
+    """Every render and recording of ``spec``, with the hashes that decide whether each must be (re)done.
+
+    Resolving the scenes and hashing the scene and trajectory files happens here, in the calling process, so
+    an unknown scene or a missing file fails before any work starts.
+    """
+    versions = _versions()
+    optics = Optics()
+    sensors = tuple((kind, s.params) for kind, s in spec.sensors.items())
+    sensors_dict = {kind: s.to_dict() for kind, s in spec.sensors.items()}
+    renders, recordings = [], []
+    for seq in spec.sequences:
+        seed = _render_seed(spec.seed, seq.name)
+        render_hash = spec_hash({"render": sequence_hash(seq), "seed": seed, "versions": versions})
+        render = RenderTask(seq, render_hash, f"{RENDERS_DIR}/{seq.name}-{render_hash[:12]}", seed)
+        renders.append(render)
+        seq_hash = sequence_hash(seq, spec)
+        scene = scene_name(seq.scene)
+        for lux in spec.lux:
+            lux = float(lux)
+            stream_key = (seq.name, lux)
+            # What the file depends on; stored in the recording as its "spec" attr, so the hash and the file agree.
+            rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": seq.to_dict(), "lux": lux,
+                        "stream_key": list(stream_key), "sensors": sensors_dict,
+                        "evaluation": spec.evaluation.to_dict(), "optics": dataclasses.asdict(optics)}
+            rec_hash = spec_hash({"dataset": spec.name, "sequence": seq_hash, "render": render_hash, "lux": lux,
+                                  "stream_key": list(stream_key), "optics": dataclasses.asdict(optics),
+                                  "versions": versions})
+            metadata = {"sequence": seq.name, "scene": scene, "dataset": spec.name, "spec": canonical_json(rec_spec), "recording_hash": rec_hash,
+                        "created_utc": created_utc}
+            recordings.append(RecordingTask(
+                sequence_name=seq.name, scene=scene, lux=lux, rel_path=recording_rel_path(seq.name, lux),
+                render_rel_dir=render.rel_dir, recording_hash=rec_hash, sensors=sensors, start_s=seq.start_s,
+                duration_s=seq.duration_s, seed=spec.seed, stream_key=stream_key,
+                gt_rate_hz=spec.evaluation.rate_hz, optics=optics, metadata=tuple(sorted(metadata.items()))))
+    return Plan(tuple(renders), tuple(recordings))

@@ -1,0 +1,379 @@
+"""Loading a dataset spec: TOML in, a validated :class:`~simspad.dataset.spec.DatasetSpec` out.
+
+Every field is checked before any work starts, and every problem is reported, not only the first: one
+:class:`~simspad.errors.SpecError` lists them one per line as ``FILE: field.path: what is wrong (expected ...)``.
+Scene names are resolved against the scene library, trajectory files are looked up beside the spec and then in
+the bundled ``trajectories/``, and each sequence's span must lie within its trajectory's coverage.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from pathlib import Path
+
+from simspad import defaults
+from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
+from simspad.errors import SimSpadError, SpecError
+from simspad.io.bundled import REPO_ROOT, TRAJECTORIES_DIR
+from simspad.io.trajectory_files import load_trajectory
+from simspad.methods.registry import available_methods
+from simspad.scenes.library import resolve_scene
+from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
+
+_TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation")
+_SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
+             "min_rate_hz")
+_EVAL_KEYS = ("rate_hz", "methods")
+_NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+
+
+class _Errors:
+    """Collects one line per problem: ``FILE: field: message``."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.lines: list[str] = []
+
+    def add(self, field_path: str, message: str) -> None:
+        self.lines.append(f"{self.path}: {field_path}: {message}" if field_path else f"{self.path}: {message}")
+
+
+def _type_name(v) -> str:
+    return {bool: "boolean", int: "integer", float: "number", str: "string", list: "list",
+            dict: "table"}.get(type(v), type(v).__name__)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _number(err: _Errors, where: str, v, *, positive=False, non_negative=False, what="a number"):
+    """Return float(v) if valid, else record an error and return None."""
+    if not _is_number(v):
+        err.add(where, f"got {_type_name(v)} {v!r} (expected {what})")
+        return None
+    if not math.isfinite(v):
+        err.add(where, f"got {v!r} (expected a finite number)")
+        return None
+    if positive and not v > 0:
+        err.add(where, f"must be > 0, got {v!r} (expected {what})")
+        return None
+    if non_negative and v < 0:
+        err.add(where, f"must be ≥ 0, got {v!r} (expected {what})")
+        return None
+    return float(v)
+
+
+def load_spec(path) -> DatasetSpec:
+    """Read and validate a dataset spec.
+
+    Raises
+    ------
+    SpecError
+        Listing every problem found, one line each, naming the file and the field.
+    SimSpadError
+        When the file cannot be read.
+    """
+    path = Path(path)
+    display = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SimSpadError("spec file not found", path=display) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SimSpadError(f"cannot read spec file ({exc})", path=display) from None
+    err = _Errors(display)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
+        where = f"line {m.group(1)}" if m else ""
+        err.add(where, f"TOML syntax error: {msg} (expected valid TOML)")
+        raise SpecError(err.lines, path=display) from None
+    spec = _validate(raw, path, err)
+    if err.lines:
+        raise SpecError(err.lines, path=display)
+    return spec
+
+
+def spec_from_dict(raw: dict, *, source_path=None) -> DatasetSpec:
+    """Validate an already-parsed spec document (paths relative to ``source_path``'s folder or the cwd)."""
+    path = Path(source_path) if source_path is not None else Path.cwd() / "dataset"
+    err = _Errors(str(source_path) if source_path is not None else "<spec>")
+    spec = _validate(raw, path, err, source_path is not None)
+    if err.lines:
+        raise SpecError(err.lines, path=err.path)
+    return spec
+
+
+def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> DatasetSpec | None:
+    base = path.resolve().parent
+    for key in raw:
+        if key not in _TOP_KEYS:
+            err.add(key, f"unknown top-level key (expected one of {', '.join(_TOP_KEYS)})")
+
+    name = raw.get("name", path.stem)
+    if not isinstance(name, str) or not name.strip():
+        err.add("name", f"got {_type_name(name)} {name!r} (expected a non-empty string)")
+        name = path.stem
+    description = raw.get("description", "")
+    if not isinstance(description, str):
+        err.add("description", f"got {_type_name(description)} (expected a string)")
+
+    seed = raw.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        err.add("seed", f"got {_type_name(seed)} {seed!r} (expected an integer ≥ 0)")
+        seed = 0
+
+    output = raw.get("output", f"output/{name}")
+    if not isinstance(output, str) or not output.strip():
+        err.add("output", f"got {_type_name(output)} {output!r} (expected a folder path string)")
+        output = f"output/{name}"
+    output_path = Path(output).expanduser()
+    if not output_path.is_absolute():
+        output_path = Path.cwd() / output_path
+
+    lux = _validate_lux(raw, err)
+    sequences = _validate_sequences(raw, base, err)
+    sensors = _validate_sensors(raw, err)
+    evaluation = _validate_evaluation(raw, err)
+    if err.lines:
+        return None
+    return DatasetSpec(name=name, seed=seed, output=output_path, sequences=tuple(sequences), lux=tuple(lux),
+                       sensors=sensors, evaluation=evaluation, source_path=path.resolve() if has_file else None,
+                       raw=raw)
+
+
+def _validate_lux(raw: dict, err: _Errors) -> list[float]:
+    if "lux" not in raw:
+        err.add("lux", "missing (expected a list of illuminances in lux, each > 0)")
+        return []
+    value = raw["lux"]
+    if _is_number(value):
+        value = [value]
+    if not isinstance(value, list) or not value:
+        err.add("lux", f"got {_type_name(value)} {value!r} (expected a non-empty list of numbers > 0)")
+        return []
+    out = []
+    for i, v in enumerate(value):
+        x = _number(err, f"lux[{i}]", v, positive=True, what="an illuminance in lux > 0")
+        if x is not None:
+            if x in out:
+                err.add(f"lux[{i}]", f"duplicate lux level {v!r} (expected distinct levels)")
+            out.append(x)
+    return out
+
+
+def _validate_sequences(raw: dict, base: Path, err: _Errors) -> list[SequenceSpec]:
+    if "sequences" not in raw:
+        err.add("sequences", "missing (expected one or more [[sequences]] tables)")
+        return []
+    value = raw["sequences"]
+    if not isinstance(value, list) or not value or not all(isinstance(s, dict) for s in value):
+        err.add("sequences", f"got {_type_name(value)} (expected one or more [[sequences]] tables)")
+        return []
+    out, seen = [], {}
+    for i, table in enumerate(value):
+        name, seq = _validate_sequence(table, f"sequences[{i}]", base, err)
+        if name is not None and name in seen:
+            err.add(f"sequences[{i}].name", f"duplicate sequence name {name!r} (also sequences[{seen[name]}]; "
+                    "expected unique names: set name = \"...\")")
+        elif name is not None:
+            seen[name] = i
+        if seq is not None:
+            out.append(seq)
+    return out
+
+
+def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[str | None, SequenceSpec | None]:
+    """(name, spec) of one [[sequences]] table; spec is None after an error (the name still serves to find
+    duplicates)."""
+    n_errors = len(err.lines)
+    for key in t:
+        if key not in _SEQ_KEYS:
+            err.add(f"{where}.{key}", f"unknown key (expected one of {', '.join(_SEQ_KEYS)})")
+
+    scene = t.get("scene")
+    if scene is None:
+        err.add(f"{where}.scene", "missing (expected a built-in scene name or a scene folder path)")
+    elif not isinstance(scene, str) or not scene.strip():
+        err.add(f"{where}.scene", f"got {_type_name(scene)} {scene!r} (expected a scene name string)")
+        scene = None
+    else:
+        scene = _check_scene(scene, base, f"{where}.scene", err)
+
+    name = t.get("name", None)
+    if name is None:
+        name = Path(scene).name if scene else None
+        if name is not None and name.lower().endswith(".xml"):
+            name = name[:-4]
+        if name is not None:
+            name = re.sub(r"[^A-Za-z0-9._-]+", "-", name).strip("-.") or "sequence"
+    elif not isinstance(name, str) or not _NAME_RE.fullmatch(name):
+        err.add(f"{where}.name", f"got {_type_name(name)} {name!r} (expected letters, digits, '.', '_' or '-'; it "
+                "names files)")
+        name = None
+
+    trajectory = t.get("trajectory")
+    if trajectory is not None:
+        if not isinstance(trajectory, str) or not trajectory.strip():
+            err.add(f"{where}.trajectory", f"got {_type_name(trajectory)} {trajectory!r} (expected a file path)")
+            trajectory = None
+        else:
+            found = _find_trajectory(trajectory, base)
+            if found is None:
+                err.add(f"{where}.trajectory", f"trajectory file {trajectory!r} not found (looked in {base} and "
+                        f"{TRAJECTORIES_DIR}; expected an existing .toml, .json, .csv, .txt or .tum file)")
+                trajectory = None
+            else:
+                trajectory = str(found)
+
+    duration = None
+    if "duration_s" not in t:
+        err.add(f"{where}.duration_s", "missing (expected a duration in seconds > 0)")
+    else:
+        duration = _number(err, f"{where}.duration_s", t["duration_s"], positive=True,
+                           what="a duration in seconds > 0")
+    start = _number(err, f"{where}.start_s", t.get("start_s", 0.0), non_negative=True,
+                    what="a start time in seconds ≥ 0")
+
+    resolution = t.get("resolution", list(defaults.RESOLUTION_PX))
+    if (not isinstance(resolution, list) or len(resolution) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in resolution)):
+        err.add(f"{where}.resolution", f"got {resolution!r} (expected two positive integers [W, H])")
+        resolution = None
+
+    spp = t.get("spp", defaults.SPP)
+    if not isinstance(spp, int) or isinstance(spp, bool) or spp <= 0:
+        err.add(f"{where}.spp", f"got {_type_name(spp)} {spp!r} (expected an integer > 0 samples per pixel)")
+        spp = None
+    max_flow = _number(err, f"{where}.max_flow_px", t.get("max_flow_px", defaults.MAX_FLOW_PX), positive=True,
+                       what="pixels > 0")
+    min_rate = _number(err, f"{where}.min_rate_hz", t.get("min_rate_hz", defaults.MIN_KEYFRAME_RATE_HZ), positive=True,
+                       what="a rate in Hz > 0")
+    if len(err.lines) > n_errors or name is None:
+        return name, None
+    _check_trajectory(trajectory, scene, start, duration, where, err)
+    if len(err.lines) > n_errors:
+        return name, None
+    return name, SequenceSpec(name=name, scene=scene, trajectory=trajectory, duration_s=duration, start_s=start,
+                              resolution=(resolution[0], resolution[1]), spp=spp, max_flow_px=max_flow,
+                              min_rate_hz=min_rate)
+
+
+def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None:
+    """The scene as the renderer should get it (built-in name or absolute path), or None after an error."""
+    local = base / scene
+    candidate = str(local.resolve()) if local.exists() else scene
+    try:
+        resolve_scene(candidate)
+    except SimSpadError as exc:
+        detail = exc.message
+        if exc.path and exc.path not in detail:
+            detail = f"{detail} ({exc.path})"
+        err.add(where, detail)
+        return None
+    return candidate
+
+
+def _check_trajectory(trajectory: str | None, scene: str, start_s: float, duration_s: float, where: str,
+                      err: _Errors) -> None:
+    """Read the sequence's trajectory (its own or the scene's default) and check it spans the sequence."""
+    field_name = f"{where}.trajectory"
+    if trajectory is None:
+        try:
+            default = resolve_scene(scene).default_trajectory
+        except SimSpadError:
+            return
+        if default is None:
+            return
+        trajectory, field_name = str(default), f"{where}.scene (default trajectory)"
+    try:
+        ts = load_trajectory(trajectory)
+    except SimSpadError as exc:
+        err.add(field_name, exc.format())
+        return
+    if not ts.bodies() or ts.is_static:  # a still scene is covered at any time
+        return
+    t0, t1 = ts.t_start, ts.t_end
+    eps = 1e-9 * max(1.0, abs(t1))
+    if start_s < t0 - eps or start_s + duration_s > t1 + eps:
+        err.add(f"{where}.duration_s", f"the sequence spans {start_s:g}–{start_s + duration_s:g} s but its trajectory "
+                f"{Path(trajectory).name} covers {t0:g}–{t1:g} s (expected start_s ≥ {t0:g} and "
+                f"start_s + duration_s ≤ {t1:g})")
+
+
+def _find_trajectory(name: str, base: Path) -> Path | None:
+    p = Path(name).expanduser()
+    # The spec's folder first, then the repository's trajectories/ (and its root, for "trajectories/x.toml").
+    candidates = [p] if p.is_absolute() else [base / p, TRAJECTORIES_DIR / p, REPO_ROOT / p]
+    for c in candidates:
+        if c.is_file():
+            return c.resolve()
+    return None
+
+
+def _validate_sensors(raw: dict, err: _Errors) -> dict[str, SensorSpec]:
+    value = raw.get("sensors")
+    if value is None:
+        return {k: SensorSpec(k, DEFAULT_PRESET[k], sensor_params(k)) for k in SENSOR_KINDS}
+    if not isinstance(value, dict) or not value:
+        err.add("sensors", f"got {_type_name(value)} (expected [sensors.spad], [sensors.frames] and/or "
+                "[sensors.events] tables)")
+        return {}
+    out = {}
+    for kind, table in value.items():
+        where = f"sensors.{kind}"
+        if kind not in SENSOR_KINDS:
+            err.add(where, f"unknown sensor kind {kind!r} (expected one of {', '.join(SENSOR_KINDS)})")
+            continue
+        if not isinstance(table, dict):
+            err.add(where, f"got {_type_name(table)} (expected a table with preset = \"...\" and overrides)")
+            continue
+        preset = table.get("preset", DEFAULT_PRESET[kind])
+        if not isinstance(preset, str) or preset not in PRESETS[kind]:
+            err.add(f"{where}.preset", f"unknown {kind} preset {preset!r} (expected one of "
+                    f"{', '.join(PRESETS[kind])})")
+            continue
+        overrides = {k: v for k, v in table.items() if k != "preset"}
+        ok = True
+        for field_name, v in overrides.items():
+            try:
+                sensor_params(kind, preset, {field_name: v})
+            except ValueError as exc:
+                err.add(f"{where}.{field_name}", str(exc))
+                ok = False
+        if not ok:
+            continue
+        try:
+            params = sensor_params(kind, preset, overrides)
+        except ValueError as exc:
+            err.add(where, str(exc))
+            continue
+        out[kind] = SensorSpec(kind, preset, params, overrides)
+    return out
+
+
+def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
+    value = raw.get("evaluation", {})
+    if not isinstance(value, dict):
+        err.add("evaluation", f"got {_type_name(value)} (expected an [evaluation] table)")
+        return EvaluationSpec()
+    for key in value:
+        if key not in _EVAL_KEYS:
+            err.add(f"evaluation.{key}", f"unknown key (expected one of {', '.join(_EVAL_KEYS)})")
+    rate = _number(err, "evaluation.rate_hz", value.get("rate_hz", defaults.GT_RATE_HZ), positive=True, what="a rate in Hz > 0")
+    methods = value.get("methods", [])
+    if isinstance(methods, str):
+        methods = [methods]
+    if not isinstance(methods, list) or not all(isinstance(m, str) for m in methods):
+        err.add("evaluation.methods", f"got {methods!r} (expected a list of method names)")
+        methods = []
+    known = set(available_methods())
+    for i, m in enumerate(methods):
+        if m not in known:
+            err.add(f"evaluation.methods[{i}]", f"unknown method {m!r} (expected one of {', '.join(sorted(known))})")
+    return EvaluationSpec(rate_hz=rate if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods))
