@@ -43,8 +43,8 @@ import numpy as np
 
 from simspad.methods.akf import NediAkf, akf_frames, akf_params_for
 from simspad.methods.event_batches import EventBatch, event_thresholds
+from simspad.methods.method import aggregate_bits
 from simspad.methods.nedi import nedi_deblur
-from simspad.methods.registry import aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
 
 

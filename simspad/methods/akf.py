@@ -53,8 +53,8 @@ from scipy.ndimage import uniform_filter
 
 from simspad.methods.edi import frame_measurements
 from simspad.methods.event_batches import event_thresholds
+from simspad.methods.method import Method
 from simspad.methods.nedi import aggregate_bins, spad_measurements
-from simspad.methods.registry import Method
 from simspad.methods.windows import Measurement
 from simspad.physics.photoreceptor import time_constant_s
 from simspad.physics.radiometry import detection_area_m2

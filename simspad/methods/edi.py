@@ -18,7 +18,7 @@ from scipy import ndimage
 
 from simspad.errors import InputError
 from simspad.methods.event_batches import EventCursor, group_by_pixel, mean_exp_level
-from simspad.methods.registry import BandwidthTally, Method
+from simspad.methods.method import BandwidthTally, Method
 from simspad.methods.spad_response import FrameResponse
 from simspad.methods.windows import Measurement, open_loop_frames
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from simspad.errors import InputError
 from simspad.methods.event_batches import EventBatch, EventCursor, group_by_pixel
-from simspad.methods.registry import BandwidthTally, Method, aggregate_bits
+from simspad.methods.method import BandwidthTally, Method, aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
 from simspad.methods.windows import Measurement, open_loop_frames
 

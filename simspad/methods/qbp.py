@@ -30,7 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from simspad.errors import InputError
-from simspad.methods.registry import Method
+from simspad.methods.method import Method
 from simspad.methods.spad_response import SpadResponse, estimate_flux
 
 HOT_DCR_CPS = 100.0

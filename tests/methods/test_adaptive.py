@@ -5,6 +5,11 @@ import pytest
 
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
+from simspad.methods.adaptive import TilePolicy
+from simspad.methods.akf import AkfState
+from simspad.methods.method import BandwidthTally
+from simspad.methods.nedi import spad_measurements
+from simspad.methods.spad_response import SpadResponse, estimate_flux
 from tests.helpers.synthetic_recordings import write_recording
 
 SHAPE = (16, 64)
@@ -64,12 +69,6 @@ def test_adaptive_reads_static_regions_rarely(rec_path):
 
 def test_integration_since_last_readout_uses_all_pending_bins(tmp_path):
     """A tile read after skipping windows gets NEDI over every bin since its previous readout."""
-    from simspad.methods.adaptive import TilePolicy
-    from simspad.methods.akf import AkfState
-    from simspad.methods.nedi import spad_measurements
-    from simspad.methods.registry import BandwidthTally
-    from simspad.methods.spad_response import SpadResponse, estimate_flux
-
     path = tmp_path / "flat.h5"
     write_recording(path, lambda t: np.full((8, 8), 2e15), shape=(8, 8), duration_s=0.012, frames=False,
                     dcr_cps=10.0)
