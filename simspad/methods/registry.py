@@ -8,7 +8,7 @@ module sits above every method module, so none of them imports it (no cycle).
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from simspad.errors import SimSpadError
 from simspad.methods.adaptive import AdaptiveNediAkf
