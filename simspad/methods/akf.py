@@ -55,9 +55,9 @@ from simspad.methods.edi import frame_measurements
 from simspad.methods.event_batches import event_thresholds
 from simspad.methods.method import Method
 from simspad.methods.nedi import aggregate_bins, spad_measurements
+from simspad.methods.spad_response import attrs_detection_area_m2
 from simspad.methods.windows import Measurement
 from simspad.physics.photoreceptor import time_constant_s
-from simspad.physics.radiometry import detection_area_m2
 
 
 @dataclass(frozen=True)
@@ -314,8 +314,8 @@ def akf_params_for(rec, **overrides) -> AkfParams:
     values = {"q_threshold": sigma ** 2}
     a = rec.events.attrs
     try:
-        values.update(pr_area_m2=detection_area_m2(float(a["pixel_pitch_m"]), float(a.get("fill_factor", 1.0)),
-                                                   float(a["qe"])),
+        values.update(pr_area_m2=attrs_detection_area_m2(float(a["pixel_pitch_m"]), float(a.get("fill_factor", 1.0)),
+                                                         float(a["qe"])),
                       pr_dark_e_s=float(a.get("dark_current_e_s", 0.0)),
                       pr_cutoff_hz_max=float(a["photoreceptor_cutoff_hz_max"]),
                       pr_cutoff_ref_e_s=float(a["photoreceptor_cutoff_ref_rate_e_s"]))
