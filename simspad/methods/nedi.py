@@ -26,7 +26,12 @@ import numba
 import numpy as np
 
 from simspad.errors import InputError
-from simspad.methods.event_batches import EventBatch, EventCursor, group_by_pixel
+from simspad.methods.event_batches import (
+    EventBatch,
+    EventCursor,
+    PixelEvents,
+    group_by_pixel,
+)
 from simspad.methods.method import BandwidthTally, Method, aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
 from simspad.methods.windows import Measurement, open_loop_frames
@@ -49,19 +54,6 @@ class AggregateWindow(NamedTuple):
     """[n_bins] sorted sampling instants of the bins (s)."""
     t_ref: float
     """Reference instant f (s)."""
-
-
-class PixelEvents(NamedTuple):
-    """A window's events grouped per pixel (:func:`simspad.methods.event_batches.group_by_pixel`)."""
-
-    order: np.ndarray
-    """Event indices, by pixel then time."""
-    offsets: np.ndarray
-    """[N + 1] pixel p's events are ``order[offsets[p]:offsets[p + 1]]``."""
-    t_s: np.ndarray
-    """Event times (s)."""
-    dl: np.ndarray
-    """Signed log steps (±c)."""
 
 
 class NediResponse(NamedTuple):
