@@ -36,6 +36,7 @@ from simspad.errors import SimSpadError
 from simspad.evaluate import metrics
 from simspad.evaluate.protocol import (
     DEFAULT_RATE_HZ,
+    ScoringRun,
     evaluation_indices,
     gt_white_point,
     protocol_metadata,
@@ -106,9 +107,9 @@ def run_task(task: Task) -> dict:
                                           {"method": task.method, "recording": e.rel, "units": "photons s-1 m-2"})
             try:
                 reco = method.reconstruct(rec, times)
-                res = score_frames(rec, idx, reco, white=white, absolute_scale=method.absolute_scale,
-                                   method=task.method, recording=e.rel, scene=e.scene, image_frame=idx.size // 2,
-                                   frame_sink=sink)
+                run = ScoringRun(method=task.method, recording=e.rel, scene=e.scene, white=white,
+                                 absolute_scale=method.absolute_scale, image_frame=idx.size // 2)
+                res = score_frames(rec, idx, reco, run, frame_sink=sink)
             finally:
                 if sink is not None:
                     sink.close()

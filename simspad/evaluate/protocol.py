@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -95,8 +96,35 @@ def _checked_frame(img, i: int, n: int, shape: tuple[int, int]) -> np.ndarray:
     return img
 
 
-def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: bool, method: str,
-                 recording: str, scene: str, image_frame: int, frame_sink=None):
+@dataclass(frozen=True)
+class ScoringRun:
+    """How one method's frames on one recording are scored, and the labels of its per-frame rows.
+
+    Attributes
+    ----------
+    method : str
+        Method name (the ``method`` column).
+    recording : str
+        Recording path relative to the dataset (the ``recording`` column).
+    scene : str
+        Scene name (Siemens-star scenes also get the MTF).
+    white : float
+        Sequence white point (ph s⁻¹ m⁻²).
+    absolute_scale : bool
+        False: each frame is aligned by the log-affine fit before scoring.
+    image_frame : int
+        Position (in the evaluation indices) of the instant whose display-mapped crops are returned.
+    """
+
+    method: str
+    recording: str
+    scene: str
+    white: float
+    absolute_scale: bool
+    image_frame: int
+
+
+def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None):
     """Score a stream of reconstructed frames against the recording's ground truth at ``idx``.
 
     Parameters
@@ -106,12 +134,8 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
         Ground-truth frame indices (the evaluation instants), in order.
     frames : iterable of ndarray [H,W]
         The reconstruction, one frame per index.
-    white : float
-        Sequence white point (ph s⁻¹ m⁻²).
-    absolute_scale : bool
-        False: each frame is aligned by the log-affine fit before scoring.
-    image_frame : int
-        Position (in ``idx``) of the instant whose display-mapped crops are returned.
+    run : ScoringRun
+        White point, scale, labels and the frame whose crops are returned.
     frame_sink : callable(i, frame), optional
         Receives each frame (to save the reconstructions).
 
@@ -121,10 +145,11 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
     (rec and gt display crops at ``image_frame``) and ``method_s`` (time spent inside the frame iterator).
     Raises ValueError on a frame of the wrong shape, a non-finite value or a wrong number of frames.
     """
+    white, absolute_scale, image_frame = run.white, run.absolute_scale, run.image_frame
     H, W = rec.height, rec.width
     t = rec.gt.t
     frame_rows, psnrs, ssims = [], [], []
-    star = is_siemens_star(scene)
+    star = is_siemens_star(run.scene)
     geometry = None
     mtf = _MeanMtf()
     images = None
@@ -144,7 +169,8 @@ def score_frames(rec, idx: np.ndarray, frames, *, white: float, absolute_scale: 
             frame_sink(i, img)
         gt = rec.gt.flux(int(idx[i]))
         s = metrics.frame_scores(img, gt, white, absolute_scale)
-        frame_rows.append({"method": method, "recording": recording, "frame": i, "t_s": float(t[idx[i]]), **s})
+        frame_rows.append({"method": run.method, "recording": run.recording, "frame": i, "t_s": float(t[idx[i]]),
+                           **s})
         psnrs.append(s["psnr_db"])
         ssims.append(s["ssim"])
         if star or i == image_frame:

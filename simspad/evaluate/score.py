@@ -20,6 +20,7 @@ from simspad.errors import InputError
 from simspad.evaluate import metrics
 from simspad.evaluate.protocol import (
     DEFAULT_RATE_HZ,
+    ScoringRun,
     evaluation_indices,
     gt_white_point,
     protocol_metadata,
@@ -110,9 +111,9 @@ def score(submission, dataset_dir, out_dir=None, rate_hz=None) -> tuple[Path, li
                 with open_recording(e.path) as rec:
                     white = gt_white_point(rec, idx)
                     ds = h5[name]["flux"]
-                    res = score_frames(rec, idx, (ds[i] for i in range(ds.shape[0])), white=white,
-                                       absolute_scale=attrs["absolute_scale"], method=attrs["method"],
-                                       recording=e.rel, scene=e.scene, image_frame=idx.size // 2)
+                    run = ScoringRun(method=attrs["method"], recording=e.rel, scene=e.scene, white=white,
+                                     absolute_scale=attrs["absolute_scale"], image_frame=idx.size // 2)
+                    res = score_frames(rec, idx, (ds[i] for i in range(ds.shape[0])), run)
                 row = {"method": attrs["method"], "label": attrs["label"], "sensors": attrs["sensors"],
                        "scene": e.scene, "sequence": e.sequence, "lux": e.lux, "recording": e.rel,
                        "psnr_db": res["psnr_db"], "ssim": res["ssim"], "mtf50_cyc_px": float("nan"),

@@ -18,13 +18,7 @@ name                   label                       what it reads / does (default
 All parameters come from the recording's attrs (DESIGN §5); none is tuned per scene.
 """
 
-from simspad.methods.registry import (
-    Bandwidth,
-    Method,
-    Reconstruction,
-    available_methods,
-    get_method,
-    register,
-)
+from simspad.methods.method import Bandwidth, Method, Reconstruction
+from simspad.methods.registry import available_methods, get_method, register
 
 __all__ = ["Bandwidth", "Method", "Reconstruction", "available_methods", "get_method", "register"]

@@ -37,23 +37,51 @@ quality-versus-readouts trade-off (events from slow, dim photoreceptors do not d
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from simspad.methods.akf import NediAkf, akf_frames, akf_params_for
 from simspad.methods.event_batches import EventBatch, event_thresholds
+from simspad.methods.method import aggregate_bits
 from simspad.methods.nedi import nedi_deblur
-from simspad.methods.registry import aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
+
+
+@dataclass(frozen=True)
+class ReadoutRules:
+    """When a tile reads its SPAD aggregate (see the module docstring); ``None`` switches a rule off.
+
+    Attributes
+    ----------
+    tile_px : int
+        Side of the square tiles (pixels).
+    ratio : float or None
+        Read when the tile's mean P exceeds ``ratio`` × the variance one aggregate would deliver.
+    threshold : float or None
+        Read when the tile's mean P exceeds this (log-irradiance²).
+    integrate : bool
+        An unread tile keeps counting, for at most ``max_windows`` windows.
+    max_windows : int
+        Longest integration, in candidate windows (with ``integrate``).
+    max_interval : int or None
+        Read a tile at least every ``max_interval`` candidate windows.
+    """
+
+    tile_px: int = 16
+    ratio: float | None = 1.0
+    threshold: float | None = None
+    integrate: bool = False
+    max_windows: int = 16
+    max_interval: int | None = None
 
 
 class TilePolicy:
     """Per-tile readout decisions (and re-aggregation) for :func:`simspad.methods.akf.akf_frames`."""
 
-    def __init__(self, shape: tuple[int, int], tally, resp: SpadResponse, tile_px: int = 16,
-                 ratio: float | None = 1.0, threshold: float | None = None, integrate: bool = False,
-                 max_windows: int = 16, max_interval: int | None = None):
+    def __init__(self, shape: tuple[int, int], tally, resp: SpadResponse, rules: ReadoutRules = ReadoutRules()):
+        tile_px, ratio, threshold = rules.tile_px, rules.ratio, rules.threshold
+        integrate, max_windows, max_interval = rules.integrate, rules.max_windows, rules.max_interval
         H, W = shape
         ty, tx = (H + tile_px - 1) // tile_px, (W + tile_px - 1) // tile_px
         yy, xx = np.mgrid[0:H, 0:W]
@@ -190,8 +218,8 @@ class AdaptiveNediAkf(NediAkf):
         if threshold == "auto":
             c_on, c_off, _ = event_thresholds(rec)
             threshold = (0.25 * (c_on + c_off)) ** 2  # (c/2)², c the mean nominal threshold
-        policy = TilePolicy(shape, tally, SpadResponse.from_recording(rec), self.tile_px, self.ratio,
-                            threshold, self.integrate, self.max_windows, self.max_interval)
+        rules = ReadoutRules(self.tile_px, self.ratio, threshold, self.integrate, self.max_windows, self.max_interval)
+        policy = TilePolicy(shape, tally, SpadResponse.from_recording(rec), rules)
         self.last_policy = policy
         meas = self._measurements(rec, times_s, tally)
         yield from akf_frames(meas, times_s, shape, akf_params_for(rec, **self.akf), tally, adaptive=policy)

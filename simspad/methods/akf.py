@@ -45,7 +45,7 @@ window 10 ms. The initial state is the first measurement with P = its ``var_log`
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable, Iterator
+from typing import Iterable, Iterator, NamedTuple
 
 import numba
 import numpy as np
@@ -53,11 +53,11 @@ from scipy.ndimage import uniform_filter
 
 from simspad.methods.edi import frame_measurements
 from simspad.methods.event_batches import event_thresholds
+from simspad.methods.method import Method
 from simspad.methods.nedi import aggregate_bins, spad_measurements
-from simspad.methods.registry import Method
+from simspad.methods.spad_response import attrs_detection_area_m2
 from simspad.methods.windows import Measurement
 from simspad.physics.photoreceptor import time_constant_s
-from simspad.physics.radiometry import detection_area_m2
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,47 @@ class AkfParams:
     pr_dark_e_s: float = 0.0
     pr_cutoff_hz_max: float = 0.0
     pr_cutoff_ref_e_s: float = 1.0
+
+
+class FilterArrays(NamedTuple):
+    """The per-pixel state arrays the event kernel updates in place (flattened ``[N]`` float64)."""
+
+    L: np.ndarray
+    """Log irradiance ln Φ (Φ in ph s⁻¹ m⁻²)."""
+    P: np.ndarray
+    """Variance of L."""
+    LF: np.ndarray
+    """Frame value L^F the state relaxes to."""
+    Rinv: np.ndarray
+    """Inverse measurement noise density 1/R (s⁻¹ per log-irradiance²)."""
+    t_upd: np.ndarray
+    """Time of the pixel's last update (s)."""
+    t_last_ev: np.ndarray
+    """Time of the pixel's last event (s)."""
+    tau_pr: np.ndarray
+    """Photoreceptor time constant τ (s), used when ``EventUpdateParams.use_bw``."""
+
+
+class EventArrays(NamedTuple):
+    """Time-sorted events: time (s), flat pixel index, signed log step (±c)."""
+
+    t_s: np.ndarray
+    pix: np.ndarray
+    dl: np.ndarray
+
+
+class EventUpdateParams(NamedTuple):
+    """The event kernel's grid (width, height in pixels) and noise terms (as in :class:`AkfParams`)."""
+
+    width: int
+    height: int
+    sigma_p: float
+    sigma_iso: float
+    sigma_ref: float
+    refractory_window_s: float
+    q_threshold: float
+    use_bw: bool
+    """Whether Q_bw (the photoreceptor-bandwidth term) is added."""
 
 
 class AkfState:
@@ -104,10 +145,10 @@ class AkfState:
     def events(self, t_s, pix, dl, params: AkfParams) -> None:
         """Apply time-sorted events (numba kernel)."""
         if len(t_s):
-            akf_events(self.L, self.P, self.LF, self.Rinv, self.t_upd, self.t_last_ev, self.width, self.height,
-                       t_s, pix, dl, params.sigma_p, params.sigma_iso, params.sigma_ref,
-                       params.refractory_window_s, params.q_threshold, self.tau_pr,
-                       params.pr_cutoff_hz_max > 0.0)
+            state = FilterArrays(self.L, self.P, self.LF, self.Rinv, self.t_upd, self.t_last_ev, self.tau_pr)
+            update = EventUpdateParams(self.width, self.height, params.sigma_p, params.sigma_iso, params.sigma_ref,
+                                       params.refractory_window_s, params.q_threshold, params.pr_cutoff_hz_max > 0.0)
+            akf_events(state, EventArrays(t_s, pix, dl), update)
             self.n_events += len(t_s)
 
     def advance(self, t_s: float, sigma_p: float, mask: np.ndarray | None = None) -> None:
@@ -134,9 +175,11 @@ class AkfState:
 
 
 @numba.njit(cache=True, boundscheck=False)
-def akf_events(L, P, LF, Rinv, t_upd, t_last_ev, width, height, ev_t, ev_pix, ev_dl, sigma_p, sigma_iso,
-               sigma_ref, refr_window, q_thr, tau_pr, use_bw):
+def akf_events(state: FilterArrays, events: EventArrays, params: EventUpdateParams) -> None:
     """Per-event AKF update: relax the pixel to the event time, then apply the event and its noise."""
+    L, P, LF, Rinv, t_upd, t_last_ev, tau_pr = state
+    ev_t, ev_pix, ev_dl = events
+    width, height, sigma_p, sigma_iso, sigma_ref, refr_window, q_thr, use_bw = params
     for e in range(ev_t.size):
         i = ev_pix[e]
         t = ev_t[e]
@@ -271,8 +314,8 @@ def akf_params_for(rec, **overrides) -> AkfParams:
     values = {"q_threshold": sigma ** 2}
     a = rec.events.attrs
     try:
-        values.update(pr_area_m2=detection_area_m2(float(a["pixel_pitch_m"]), float(a.get("fill_factor", 1.0)),
-                                                   float(a["qe"])),
+        values.update(pr_area_m2=attrs_detection_area_m2(float(a["pixel_pitch_m"]), float(a.get("fill_factor", 1.0)),
+                                                         float(a["qe"])),
                       pr_dark_e_s=float(a.get("dark_current_e_s", 0.0)),
                       pr_cutoff_hz_max=float(a["photoreceptor_cutoff_hz_max"]),
                       pr_cutoff_ref_e_s=float(a["photoreceptor_cutoff_ref_rate_e_s"]))

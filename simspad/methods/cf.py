@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 from simspad.methods.event_batches import EventCursor
-from simspad.methods.registry import Method
+from simspad.methods.method import Method
 
 
 @numba.njit(cache=True)

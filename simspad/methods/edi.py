@@ -17,8 +17,13 @@ import numpy as np
 from scipy import ndimage
 
 from simspad.errors import InputError
-from simspad.methods.event_batches import EventCursor, group_by_pixel, mean_exp_level
-from simspad.methods.registry import BandwidthTally, Method
+from simspad.methods.event_batches import (
+    EventCursor,
+    PixelEvents,
+    group_by_pixel,
+    mean_exp_level,
+)
+from simspad.methods.method import BandwidthTally, Method
 from simspad.methods.spad_response import FrameResponse
 from simspad.methods.windows import Measurement, open_loop_frames
 
@@ -33,7 +38,8 @@ def edi_deblur(flux_blur: np.ndarray, events, t0_s: float, t1_s: float, t_ref_s:
     mean = np.empty(n_pix)
     lref = np.empty(n_pix)
     order, offsets = group_by_pixel(events.pix, n_pix)
-    mean_exp_level(order, offsets, events.t_s, events.dl, float(t0_s), float(t1_s), float(t_ref_s), mean, lref)
+    mean_exp_level(PixelEvents(order, offsets, events.t_s, events.dl), float(t0_s), float(t1_s), float(t_ref_s),
+                   mean, lref)
     return (flux_blur.reshape(-1) / mean).reshape(shape), lref.reshape(shape)
 
 

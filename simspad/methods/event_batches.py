@@ -12,6 +12,7 @@ The level of a pixel, ``ℓ(t) = Σ_{events e at the pixel, t_e ≤ t} dl_e``, i
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -114,6 +115,19 @@ def group_by_pixel(pix: np.ndarray, n_pixels: int) -> tuple[np.ndarray, np.ndarr
     return order, offsets
 
 
+class PixelEvents(NamedTuple):
+    """A window's events grouped per pixel (:func:`group_by_pixel` and the batch's times and steps)."""
+
+    order: np.ndarray
+    """Event indices, by pixel then time."""
+    offsets: np.ndarray
+    """[N + 1] pixel p's events are ``order[offsets[p]:offsets[p + 1]]``."""
+    t_s: np.ndarray
+    """Event times (s)."""
+    dl: np.ndarray
+    """Signed log steps (±c)."""
+
+
 def levels_at(batch: EventBatch, t_s: float, n_pixels: int, start: int = 0,
               base: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Per-pixel level at ``t_s`` (events with time ≤ t_s), incrementally from ``base`` after ``start`` events.
@@ -128,11 +142,12 @@ def levels_at(batch: EventBatch, t_s: float, n_pixels: int, start: int = 0,
 
 
 @numba.njit(cache=True)
-def mean_exp_level(order, offsets, ev_t, ev_dl, t0, t1, t_ref, out_mean, out_lref):
+def mean_exp_level(events: PixelEvents, t0, t1, t_ref, out_mean, out_lref) -> None:
     """Per pixel: ``(1/(t1−t0))∫_{t0}^{t1} exp(ℓ(t) − ℓ(t_ref)) dt`` and ``ℓ(t_ref)`` (ℓ relative to the batch start).
 
     The EDI blur integral (Pan et al. 2019) with ℓ piecewise constant between events.
     """
+    order, offsets, ev_t, ev_dl = events
     n_pix = offsets.size - 1
     span = t1 - t0
     for p in range(n_pix):

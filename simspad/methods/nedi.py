@@ -20,14 +20,19 @@ reference paper's Deblur(S) and NEDI+AKF rows (DESIGN §9).
 
 from __future__ import annotations
 
-from typing import Iterator
+from typing import Iterator, NamedTuple
 
 import numba
 import numpy as np
 
 from simspad.errors import InputError
-from simspad.methods.event_batches import EventBatch, EventCursor, group_by_pixel
-from simspad.methods.registry import BandwidthTally, Method, aggregate_bits
+from simspad.methods.event_batches import (
+    EventBatch,
+    EventCursor,
+    PixelEvents,
+    group_by_pixel,
+)
+from simspad.methods.method import BandwidthTally, Method, aggregate_bits
 from simspad.methods.spad_response import SpadResponse, floor_flux, log_flux_variance
 from simspad.methods.windows import Measurement, open_loop_frames
 
@@ -36,6 +41,41 @@ DEFAULT_AGGREGATE_HZ = 400.0
 
 GATE_AT_BIN_START = True
 """The gate opens at each bin's ``t_start`` (DESIGN §5 /spad/t_start): a bin samples at ``t_start + gate_s/2``."""
+
+
+class AggregateWindow(NamedTuple):
+    """One SPAD aggregate as the NEDI kernel reads it."""
+
+    counts: np.ndarray
+    """[N] float64 ones per pixel."""
+    n_bins: int
+    """Bins aggregated."""
+    bin_t: np.ndarray
+    """[n_bins] sorted sampling instants of the bins (s)."""
+    t_ref: float
+    """Reference instant f (s)."""
+
+
+class NediResponse(NamedTuple):
+    """The SPAD response the kernel inverts (:class:`simspad.methods.spad_response.SpadResponse`)."""
+
+    q_m2: float
+    """Detection area qe·fill·pitch² (m²)."""
+    gate_s: float
+    dcr_cps: np.ndarray
+    """[N] dark count rate per pixel (counts s⁻¹)."""
+    phi_floor: float
+    """Flux floor (ph s⁻¹ m⁻²) at which the variance is evaluated for dark pixels."""
+    linear: bool
+    """Linear EDI on −ln(1 − S/n) instead of the exact response."""
+
+
+class NediOutputs(NamedTuple):
+    """[N] float64 arrays the kernel writes: Φ(f), Var(ln Φ̂) and ℓ(f)."""
+
+    phi: np.ndarray
+    var_log: np.ndarray
+    level_ref: np.ndarray
 
 
 @numba.njit(cache=True)
@@ -90,14 +130,16 @@ def _fisher_var_log(m, a, nseg, phi, q, g, r):
 
 
 @numba.njit(cache=True)
-def nedi_kernel(counts, n_bins, bin_t, order, offsets, ev_t, ev_dl, t_ref, q, g, dcr, phi_floor, linear,
-                out_phi, out_var, out_lref):
-    """Solve NEDI (or linear EDI when ``linear``) for every pixel; see the module docstring.
+def nedi_kernel(window: AggregateWindow, events: PixelEvents, response: NediResponse, out: NediOutputs) -> None:
+    """Solve NEDI (or linear EDI when ``response.linear``) for every pixel; see the module docstring.
 
-    ``counts`` [N] ones per pixel; ``bin_t`` [n] sorted sampling instants of the bins; events grouped per pixel
-    by ``order``/``offsets`` (time order within a pixel); ``dcr`` [N] dark count rate. Writes Φ(f), Var(ln Φ̂)
-    and ℓ(f) (counted from the window start) per pixel.
+    Events are grouped per pixel (time order within a pixel). Writes Φ(f), Var(ln Φ̂) and ℓ(f) (counted from the
+    window start) per pixel into ``out``.
     """
+    counts, n_bins, bin_t, t_ref = window
+    order, offsets, ev_t, ev_dl = events
+    q, g, dcr, phi_floor, linear = response
+    out_phi, out_var, out_lref = out
     n_pix = counts.size
     n = float(n_bins)
     max_seg = 1
@@ -175,10 +217,10 @@ def nedi_deblur(counts: np.ndarray, n_bins: int, bin_t_s: np.ndarray, events: Ev
     phi = np.empty(n_pix)
     var = np.empty(n_pix)
     lref = np.empty(n_pix)
-    nedi_kernel(np.ascontiguousarray(counts, dtype=np.float64).reshape(-1), int(n_bins),
-                np.ascontiguousarray(bin_t_s, dtype=np.float64), order, offsets, events.t_s, events.dl,
-                float(t_ref_s), float(q_m2), float(gate_s), dcr, floor_flux(n_bins, q_m2, gate_s), bool(linear),
-                phi, var, lref)
+    window = AggregateWindow(np.ascontiguousarray(counts, dtype=np.float64).reshape(-1), int(n_bins),
+                             np.ascontiguousarray(bin_t_s, dtype=np.float64), float(t_ref_s))
+    response = NediResponse(float(q_m2), float(gate_s), dcr, floor_flux(n_bins, q_m2, gate_s), bool(linear))
+    nedi_kernel(window, PixelEvents(order, offsets, events.t_s, events.dl), response, NediOutputs(phi, var, lref))
     return phi.reshape(shape), var.reshape(shape), lref.reshape(shape)
 
 

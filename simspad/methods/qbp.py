@@ -24,16 +24,45 @@ Bandwidth: raw binary frames, 1 bit per bin at 1/bin_s (the paper's QBP @100 kHz
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from scipy import ndimage
 
 from simspad.errors import InputError
-from simspad.methods.registry import Method
+from simspad.methods.method import Method
 from simspad.methods.spad_response import SpadResponse, estimate_flux
 
 HOT_DCR_CPS = 100.0
+
+
+class TileSearch(NamedTuple):
+    """Block-matching search of one pyramid level: tiles of ``tile`` px, ``init + [−radius, radius]²``."""
+
+    tile: int
+    """Tile side (pixels)."""
+    radius: int
+    """Search radius around the initial displacement (pixels)."""
+    init_dy: np.ndarray
+    """[ny, nx] int64 initial displacement per tile, y (pixels)."""
+    init_dx: np.ndarray
+    """[ny, nx] int64 initial displacement per tile, x (pixels)."""
+    l2: bool
+    """Compare tiles by squared (True) or absolute (False) differences."""
+
+
+class TileMatches(NamedTuple):
+    """What :func:`match_tiles` writes per tile: the best displacement and the L2 costs around it."""
+
+    dy: np.ndarray
+    """[ny, nx] int64 best displacement, y (pixels)."""
+    dx: np.ndarray
+    """[ny, nx] int64 best displacement, x (pixels)."""
+    cost_y: np.ndarray
+    """[ny, nx, 3] L2 costs at the best displacement −1, 0, +1 along y."""
+    cost_x: np.ndarray
+    """[ny, nx, 3] L2 costs at the best displacement −1, 0, +1 along x."""
 
 
 @numba.njit(cache=True)
@@ -60,11 +89,13 @@ def _tile_cost(ref, img, y0, y1, x0, x1, cy, cx, l2):
 
 
 @numba.njit(cache=True)
-def match_tiles(ref, img, tile, radius, init_dy, init_dx, l2, out_dy, out_dx, cost_y, cost_x):
+def match_tiles(ref, img, search: TileSearch, out: TileMatches) -> None:
     """Integer block matching per tile: ``img(p + d) ≈ ref(p)``, searching ``init + [−radius, radius]²``.
 
     Writes the best displacement per tile and the L2 costs at the best ±1 along y and x (for sub-pixel fits).
     """
+    tile, radius, init_dy, init_dx, l2 = search
+    out_dy, out_dx, cost_y, cost_x = out
     H, W = ref.shape
     ny, nx = init_dy.shape
     for ty in range(ny):
@@ -175,7 +206,7 @@ def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smo
         dx = np.zeros(grid, np.int64)
         cost_y = np.zeros(grid + (3,))
         cost_x = np.zeros(grid + (3,))
-        match_tiles(rl, ml, tile, radius, init_y, init_x, l2, dy, dx, cost_y, cost_x)
+        match_tiles(rl, ml, TileSearch(tile, radius, init_y, init_x, l2), TileMatches(dy, dx, cost_y, cost_x))
         # A 3×3 median over tiles removes isolated mismatches (flat or noisy tiles) before they seed finer levels.
         flow_y = ndimage.median_filter(dy + _parabola(cost_y), size=3, mode="nearest")
         flow_x = ndimage.median_filter(dx + _parabola(cost_x), size=3, mode="nearest")

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from simspad.analysis import snr
 from simspad.cli import main
@@ -71,8 +72,6 @@ def test_event_snr_hand_value():
 
 
 def test_snr_cli_draws_a_figure(tmp_path):
-    from PIL import Image
-
     out = tmp_path / "snr.png"
     assert main(["snr", "--out", str(out)]) == 0
     img = np.asarray(Image.open(out).convert("RGB"))

@@ -8,6 +8,7 @@ import subprocess
 import h5py
 import numpy as np
 import pytest
+from PIL import Image
 
 from simspad.cli import main
 from simspad.evaluate import metrics
@@ -99,8 +100,6 @@ CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed")
 def test_leaderboard_renders_in_headless_chromium(evaluated, tmp_path):
-    from PIL import Image
-
     root, _ = evaluated
     out = tmp_path / "board"
     assert main(["leaderboard", str(root / "res_ni"), str(root / "res_evil"), "--out", str(out)]) == 0

@@ -1,11 +1,13 @@
 """Evaluation metrics (DESIGN §8) against hand-computed values; alignment = exact least squares; MTF."""
 
+import colour
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
 from simspad.evaluate import metrics
 from simspad.evaluate.protocol import evaluation_indices
+from simspad.scenes.assets.textures import siemens_star
 
 
 def test_psnr_of_a_known_mse():
@@ -23,8 +25,6 @@ def test_display_mapping_hand_values():
     expected = [0.0, 0.0, 12.92 * 0.002, 1.055 * 0.5 ** (1 / 2.4) - 0.055, 1.0, 1.0]
     np.testing.assert_allclose(metrics.display_map(img, W)[0], expected, atol=2e-7)
     assert expected[3] == pytest.approx(0.735357, abs=1e-6)
-    import colour
-
     x = np.linspace(0, 1, 101)
     np.testing.assert_allclose(metrics.srgb_encode(x), colour.cctf_encoding(x, function="sRGB"), atol=1e-6)
     with pytest.raises(ValueError):
@@ -85,8 +85,6 @@ def test_evaluation_grid_selects_ground_truth_instants():
 
 
 def _star(size=128, cycles=36, shift=(0, 0)):
-    from simspad.scenes.assets.textures import siemens_star
-
     img = siemens_star(size, cycles)[..., 1]
     return np.roll(img, shift, axis=(0, 1)) * 1e12
 

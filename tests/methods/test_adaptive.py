@@ -5,6 +5,11 @@ import pytest
 
 from simspad.io.recording import open_recording
 from simspad.methods import get_method
+from simspad.methods.adaptive import ReadoutRules, TilePolicy
+from simspad.methods.akf import AkfState
+from simspad.methods.method import BandwidthTally
+from simspad.methods.nedi import spad_measurements
+from simspad.methods.spad_response import SpadResponse, estimate_flux
 from tests.helpers.synthetic_recordings import write_recording
 
 SHAPE = (16, 64)
@@ -64,12 +69,6 @@ def test_adaptive_reads_static_regions_rarely(rec_path):
 
 def test_integration_since_last_readout_uses_all_pending_bins(tmp_path):
     """A tile read after skipping windows gets NEDI over every bin since its previous readout."""
-    from simspad.methods.adaptive import TilePolicy
-    from simspad.methods.akf import AkfState
-    from simspad.methods.nedi import spad_measurements
-    from simspad.methods.registry import BandwidthTally
-    from simspad.methods.spad_response import SpadResponse, estimate_flux
-
     path = tmp_path / "flat.h5"
     write_recording(path, lambda t: np.full((8, 8), 2e15), shape=(8, 8), duration_s=0.012, frames=False,
                     dcr_cps=10.0)
@@ -77,7 +76,7 @@ def test_integration_since_last_readout_uses_all_pending_bins(tmp_path):
         resp = SpadResponse.from_recording(rec)
         tally = BandwidthTally()
         meas = list(spad_measurements(rec, 100, use_events=True, until_s=0.011, tally=tally))
-        pol = TilePolicy((8, 8), tally, resp, tile_px=8, threshold=0.5, integrate=True, max_windows=16)
+        pol = TilePolicy((8, 8), tally, resp, ReadoutRules(tile_px=8, threshold=0.5, integrate=True, max_windows=16))
         st = AkfState(8, 8, 0.0)
         st.P[:] = 1.0
         mask, _ = pol.select(st, meas[0], True)  # first window: read

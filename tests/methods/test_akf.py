@@ -2,7 +2,15 @@
 
 import numpy as np
 
-from simspad.methods.akf import AkfParams, AkfState, akf_events, akf_frames
+from simspad.methods.akf import (
+    AkfParams,
+    AkfState,
+    EventArrays,
+    EventUpdateParams,
+    FilterArrays,
+    akf_events,
+    akf_frames,
+)
 from simspad.methods.event_batches import EventBatch
 from simspad.methods.windows import Measurement
 
@@ -83,7 +91,8 @@ def test_event_update_adds_threshold_isolation_and_refractory_noise():
     ev_pix = np.array([4, 4], dtype=np.int64)
     ev_dl = np.array([0.3, -0.25])
     sp, siso, sref, win, qthr = 0.005, 0.03, 0.05, 0.010, 0.03 ** 2
-    akf_events(L, P, LF, Rinv, t_upd, t_last, W, H, ev_t, ev_pix, ev_dl, sp, siso, sref, win, qthr, np.zeros(n), False)
+    akf_events(FilterArrays(L, P, LF, Rinv, t_upd, t_last, np.zeros(n)), EventArrays(ev_t, ev_pix, ev_dl),
+               EventUpdateParams(W, H, sp, siso, sref, win, qthr, False))
     p1 = 0.1 + sp * 0.020 + qthr + siso * (0.020 - 0.010) + sref * (0.020 - 0.015)
     p2 = p1 + sp * 0.025 + qthr + siso * (0.045 - 0.010)  # previous event 25 ms ago: beyond the window
     assert np.isclose(P[4], p2, rtol=1e-12)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from simspad.methods.event_batches import EventBatch
-from simspad.methods.nedi import nedi_deblur
-from simspad.methods.spad_response import estimate_flux, log_flux_variance
+from simspad.methods.nedi import laplace_update, nedi_deblur
+from simspad.methods.spad_response import estimate_flux, floor_flux, log_flux_variance
 
 Q_M2 = 0.45 * 0.105 * (16.38e-6) ** 2
 BIN_S = 10.24e-6
@@ -88,9 +88,6 @@ def test_nedi_solves_the_expected_count_equation_exactly():
 
 def test_low_count_update_is_unbiased_where_floored_logs_are_not():
     """Sequential posterior updates from sparse aggregates (0.3 expected ones each) converge to the truth."""
-    from simspad.methods.nedi import laplace_update
-    from simspad.methods.spad_response import floor_flux
-
     rng = np.random.default_rng(5)
     n_pix, n_bins, windows = 400, 244, 300
     mu = 0.3  # expected ones per aggregate
