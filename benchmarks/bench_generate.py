@@ -66,7 +66,7 @@ def naive_generate(spec, out: Path) -> float:
     for k, v in job_environment().items():
         os.environ.setdefault(k, v)
     from simspad.render.renderer import render_sequence, select_variant
-    from simspad.sensors.simulate import simulate_recording
+    from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
     t0 = time.perf_counter()
     select_variant()
@@ -77,9 +77,10 @@ def naive_generate(spec, out: Path) -> float:
                         spp=s.spp, max_flow_px=s.max_flow_px, min_rate_hz=s.min_rate_hz, seed=r.seed,
                         out_dir=out / r.rel_dir, progress=False)
     for t in plan.recordings:
-        simulate_recording(out / t.render_rel_dir, out / t.rel_path, lux=t.lux, sensors=dict(t.sensors),
-                           start_s=t.start_s, duration_s=t.duration_s, seed=t.seed, stream_key=t.stream_key,
-                           gt_rate_hz=t.gt_rate_hz, optics=t.optics, metadata=dict(t.metadata), progress=False)
+        settings = RecordingSettings(lux=t.lux, sensors=dict(t.sensors), start_s=t.start_s, duration_s=t.duration_s,
+                                     seed=t.seed, stream_key=t.stream_key, gt_rate_hz=t.gt_rate_hz, optics=t.optics)
+        simulate_recording(out / t.render_rel_dir, out / t.rel_path, settings, metadata=dict(t.metadata),
+                           progress=False)
     return time.perf_counter() - t0
 
 
@@ -132,14 +133,15 @@ def _timed_sim(render_dir: Path, out: Path, kinds, params: dict, lux: float, sta
                reps: int = 2) -> tuple[float, Path]:
     """Best of ``reps`` wall times of a simulation with only ``kinds`` (ground truth always runs)."""
     from simspad.physics.radiometry import Optics
-    from simspad.sensors.simulate import simulate_recording
+    from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
     best = math.inf
     for _ in range(reps):
         t0 = time.perf_counter()
-        simulate_recording(render_dir, out, lux=lux, sensors={k: params[k] for k in kinds}, start_s=start_s,
-                           duration_s=duration_s, seed=1, stream_key=("bench", lux), gt_rate_hz=1000.0,
-                           optics=Optics(), metadata={"created_utc": "2025-01-01T00:00:00Z"}, progress=False)
+        settings = RecordingSettings(lux=lux, sensors={k: params[k] for k in kinds}, start_s=start_s,
+                                     duration_s=duration_s, seed=1, stream_key=("bench", lux), gt_rate_hz=1000.0,
+                                     optics=Optics())
+        simulate_recording(render_dir, out, settings, metadata={"created_utc": "2025-01-01T00:00:00Z"}, progress=False)
         best = min(best, time.perf_counter() - t0)
     return best, out
 

@@ -106,13 +106,14 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     try:
         _apply_environment(env)
         from simspad.io.manifest import file_sha256
-        from simspad.sensors.simulate import simulate_recording
+        from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
         out_path = Path(out_dir) / task.rel_path
-        simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, lux=task.lux, sensors=dict(task.sensors),
-                           start_s=task.start_s, duration_s=task.duration_s, seed=task.seed,
-                           stream_key=tuple(task.stream_key), gt_rate_hz=task.gt_rate_hz, optics=task.optics,
-                           metadata=dict(task.metadata), progress=False)
+        settings = RecordingSettings(lux=task.lux, sensors=dict(task.sensors), start_s=task.start_s,
+                                     duration_s=task.duration_s, seed=task.seed, stream_key=tuple(task.stream_key),
+                                     gt_rate_hz=task.gt_rate_hz, optics=task.optics)
+        simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, settings, metadata=dict(task.metadata),
+                           progress=False)
         seconds = time.perf_counter() - t0
         return {"ok": True, "seconds": seconds, "size": out_path.stat().st_size, "sha256": file_sha256(out_path),
                 "host": socket.gethostname()}
