@@ -67,7 +67,7 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     try:
         _apply_environment(env)
         from simspad.io.atomic import atomic_path
-        from simspad.render.renderer import render_sequence, select_variant
+        from simspad.render.renderer import RenderSettings, render_sequence, select_variant
         from simspad.sensors.presets import SpadParams
 
         select_variant()  # the variant is per process: set it inside the worker, never inherit it
@@ -75,9 +75,10 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         final = Path(out_dir) / task.rel_dir
         if not (final / "timeline.json").is_file():
             with atomic_path(final) as tmp:
-                render_sequence(seq.scene, seq.trajectory, duration_s=seq.duration_s, start_s=seq.start_s,
-                                resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
-                                min_rate_hz=seq.min_rate_hz, seed=task.seed, out_dir=tmp, progress=False,
+                settings = RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s,
+                                          resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
+                                          min_rate_hz=seq.min_rate_hz, seed=task.seed)
+                render_sequence(seq.scene, seq.trajectory, settings, out_dir=tmp, progress=False,
                                 spad_bin_s=SpadParams().bin_s)
         return {"ok": True, "seconds": time.perf_counter() - t0, "n_keyframes": _count_keyframes(final),
                 "host": socket.gethostname()}
