@@ -66,21 +66,23 @@ def naive_generate(spec, out: Path) -> float:
     """Reference: one process, one thing at a time, no pool, no manifest, no resume."""
     for k, v in job_environment().items():
         os.environ.setdefault(k, v)
-    from simspad.render.renderer import render_sequence, select_variant
-    from simspad.sensors.simulate import simulate_recording
+    from simspad.render.renderer import RenderSettings, render_sequence, select_variant
+    from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
     t0 = time.perf_counter()
     select_variant()
     plan = make_plan(spec, "2025-01-01T00:00:00Z")
     for r in plan.renders:
         s = r.sequence
-        render_sequence(s.scene, s.trajectory, duration_s=s.duration_s, start_s=s.start_s, resolution=s.resolution,
-                        spp=s.spp, max_flow_px=s.max_flow_px, min_rate_hz=s.min_rate_hz, seed=r.seed,
-                        out_dir=out / r.rel_dir, progress=False)
+        render_sequence(s.scene, s.trajectory, RenderSettings(duration_s=s.duration_s, start_s=s.start_s,
+                                                              resolution=s.resolution, spp=s.spp,
+                                                              max_flow_px=s.max_flow_px, min_rate_hz=s.min_rate_hz,
+                                                              seed=r.seed), out_dir=out / r.rel_dir, progress=False)
     for t in plan.recordings:
-        simulate_recording(out / t.render_rel_dir, out / t.rel_path, lux=t.lux, sensors=dict(t.sensors),
-                           start_s=t.start_s, duration_s=t.duration_s, seed=t.seed, stream_key=t.stream_key,
-                           gt_rate_hz=t.gt_rate_hz, optics=t.optics, metadata=dict(t.metadata), progress=False)
+        settings = RecordingSettings(lux=t.lux, sensors=dict(t.sensors), start_s=t.start_s, duration_s=t.duration_s,
+                                     seed=t.seed, stream_key=t.stream_key, gt_rate_hz=t.gt_rate_hz, optics=t.optics)
+        simulate_recording(out / t.render_rel_dir, out / t.rel_path, settings, metadata=dict(t.metadata),
+                           progress=False)
     return time.perf_counter() - t0
 
 
@@ -122,25 +124,28 @@ def part_mini(spec, tmp: Path) -> Path:
 
 
 def _render(seq, out: Path, resolution, duration_s: float, seed: int = 1):
-    from simspad.render.renderer import render_sequence
+    from simspad.render.renderer import RenderSettings, render_sequence
 
-    return render_sequence(seq.scene, seq.trajectory, duration_s=duration_s, start_s=seq.start_s,
-                           resolution=resolution, spp=seq.spp, max_flow_px=seq.max_flow_px,
-                           min_rate_hz=seq.min_rate_hz, seed=seed, out_dir=out, progress=False)
+    return render_sequence(seq.scene, seq.trajectory, RenderSettings(duration_s=duration_s, start_s=seq.start_s,
+                                                                     resolution=resolution, spp=seq.spp,
+                                                                     max_flow_px=seq.max_flow_px,
+                                                                     min_rate_hz=seq.min_rate_hz, seed=seed),
+                           out_dir=out, progress=False)
 
 
 def _timed_sim(render_dir: Path, out: Path, kinds, params: dict, lux: float, start_s: float, duration_s: float,
                reps: int = 2) -> tuple[float, Path]:
     """Best of ``reps`` wall times of a simulation with only ``kinds`` (ground truth always runs)."""
     from simspad.physics.radiometry import Optics
-    from simspad.sensors.simulate import simulate_recording
+    from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
     best = math.inf
     for _ in range(reps):
         t0 = time.perf_counter()
-        simulate_recording(render_dir, out, lux=lux, sensors={k: params[k] for k in kinds}, start_s=start_s,
-                           duration_s=duration_s, seed=1, stream_key=("bench", lux), gt_rate_hz=1000.0,
-                           optics=Optics(), metadata={"created_utc": "2025-01-01T00:00:00Z"}, progress=False)
+        settings = RecordingSettings(lux=lux, sensors={k: params[k] for k in kinds}, start_s=start_s,
+                                     duration_s=duration_s, seed=1, stream_key=("bench", lux), gt_rate_hz=1000.0,
+                                     optics=Optics())
+        simulate_recording(render_dir, out, settings, metadata={"created_utc": "2025-01-01T00:00:00Z"}, progress=False)
         best = min(best, time.perf_counter() - t0)
     return best, out
 

@@ -37,7 +37,7 @@ from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.timeline import Timeline
 from simspad.render.flow import camera_poses, object_poses
 from simspad.render.mitsuba_scene import MitsubaScene
-from simspad.render.renderer import render_sequence, select_variant
+from simspad.render.renderer import RenderSettings, render_sequence, select_variant
 from simspad.render.schedule import brute_force_keyframes, focal_length_px
 from simspad.scenes.library import resolve_scene
 from simspad.sensors.presets import SpadParams
@@ -134,8 +134,8 @@ def uniform_timeline(scene, ts, n: int, res, spp, out: Path):
     """The naive reference: n keyframes evenly spaced, rendered with the same renderer."""
     # min_rate with a huge max_flow forces exactly evenly spaced keyframes.
     rate = (n - 1) / DURATION_S * (1 + 1e-9)
-    render_sequence(scene, ts, duration_s=DURATION_S, resolution=res, spp=spp, max_flow_px=1e9, min_rate_hz=rate,
-                    out_dir=out, progress=False)
+    render_sequence(scene, ts, RenderSettings(duration_s=DURATION_S, resolution=res, spp=spp, max_flow_px=1e9,
+                                              min_rate_hz=rate), out_dir=out, progress=False)
     return Timeline.open(out)
 
 
@@ -153,9 +153,9 @@ def reference_frames(scene, ts, instants, res, spp, seed=0) -> dict[float, np.nd
 def time_per_frame(variant: str, scene: Path, res, spp: int, n: int = 6) -> dict:
     """Render n keyframes in a fresh subprocess with ``variant``; return its timing summary."""
     code = (
-        "import json, sys, tempfile; from simspad.render.renderer import render_sequence;"
-        f"s = render_sequence({str(scene)!r}, None, duration_s={(n - 1) * 1e-3}, resolution={tuple(res)!r}, "
-        f"spp={spp}, min_rate_hz=1000.0, out_dir=tempfile.mkdtemp(), progress=False);"
+        "import json, sys, tempfile; from simspad.render.renderer import RenderSettings, render_sequence;"
+        f"s = render_sequence({str(scene)!r}, None, RenderSettings(duration_s={(n - 1) * 1e-3}, "
+        f"resolution={tuple(res)!r}, spp={spp}, min_rate_hz=1000.0), out_dir=tempfile.mkdtemp(), progress=False);"
         "print(json.dumps({'variant': s.variant, 'times': s.frame_times_s}))"
     )
     env = dict(os.environ, SIMSPAD_MITSUBA_VARIANT=variant)
@@ -184,9 +184,9 @@ def main(argv=None) -> int:
           "px/s at the image border")
 
     # Defaults (max_flow 0.5 px, min rate 1 kHz) first, so the kernel count is that of a fresh process.
-    s = render_sequence(scene, ts, duration_s=DURATION_S, resolution=res, spp=args.spp,
-                        max_flow_px=DEFAULT_MAX_FLOW_PX, min_rate_hz=DEFAULT_MIN_RATE_HZ, out_dir=work / "default",
-                        progress=False)
+    s = render_sequence(scene, ts, RenderSettings(duration_s=DURATION_S, resolution=res, spp=args.spp,
+                                                  max_flow_px=DEFAULT_MAX_FLOW_PX, min_rate_hz=DEFAULT_MIN_RATE_HZ),
+                        out_dir=work / "default", progress=False)
 
     rng = np.random.default_rng(1)
     instants = np.sort(rng.uniform(0.0, DURATION_S, args.references))
@@ -212,8 +212,9 @@ def main(argv=None) -> int:
     rows = []
     print(f"\n{'max_flow_px':>11} {'renders a/u':>8} {'adaptive RMSE %':>16} {'uniform RMSE %':>15} {'uniform/adaptive':>17}")
     for flow in (0.25, 0.5, 1.0, 2.0):
-        sa = render_sequence(scene, ts, duration_s=DURATION_S, resolution=res, spp=args.spp, max_flow_px=flow,
-                             min_rate_hz=50.0, out_dir=work / f"a{flow}", progress=False)
+        sa = render_sequence(scene, ts, RenderSettings(duration_s=DURATION_S, resolution=res, spp=args.spp,
+                                                       max_flow_px=flow, min_rate_hz=50.0), out_dir=work / f"a{flow}",
+                             progress=False)
         ea = rel_rmse(Timeline.open(work / f"a{flow}"), refs)
         tu = uniform_timeline(scene, ts, sa.n_keyframes, res, args.spp, work / f"u{flow}")
         eu = rel_rmse(tu, refs)

@@ -47,7 +47,6 @@ def main() -> None:
             n = min(args.bins, len(t_start) - k)
             counts = rec.spad.counts(k, k + n)
             q_m2 = detection_area_m2(a["pixel_pitch_m"], a["fill_factor"], a["qe"])
-            flux = estimate_flux(counts, n, q_m2, a["gate_s"], rec.dcr_cps)
             flux = estimate_flux(counts, n, q_m2, a["gate_s"], rec.spad.dcr_cps)
             panels.append((f"SPAD bit plane {k}", rec.spad.bits(k, k + 1)[0], "gray"))
             panels.append((f"SPAD {n} bins, ML estimate", flux, "gray"))

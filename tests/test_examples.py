@@ -10,7 +10,7 @@ import pytest
 
 from simspad.io.render_dir import write_render_dir
 from simspad.sensors.presets import sensor_params
-from simspad.sensors.simulate import simulate_recording
+from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -24,7 +24,7 @@ def test_inspect_recording_runs_and_the_spad_estimate_matches_its_predicted_spre
     write_render_dir(tmp_path / "render", times, frames)
     render = tmp_path / "render"
     sensors = {k: sensor_params(k) for k in ("spad", "frames", "events")}
-    rec = simulate_recording(render, tmp_path / "rec.h5", lux=10.0, sensors=sensors, seed=5)
+    rec = simulate_recording(render, tmp_path / "rec.h5", RecordingSettings(lux=10.0, sensors=sensors, seed=5))
     out = tmp_path / "fig.png"
     res = subprocess.run([sys.executable, str(EXAMPLES / "inspect_recording.py"), str(rec), "--out", str(out)],
                          capture_output=True, text=True, timeout=120, env=child_env)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.io.manifest import read_manifest
+from simspad.io.recording import open_recording
 
 _SPAD_SAMPLE_BINS = 1024
 """Binary frames read to estimate the mean detection probability (cheap: the file is not read whole)."""
@@ -72,8 +73,6 @@ def describe_recording(path) -> str:
     InputError
         A missing, corrupt or foreign file (from :func:`simspad.io.recording.open_recording`).
     """
-    from simspad.io.recording import open_recording
-
     path = Path(path)
     with open_recording(path) as rec:
         a = rec.attrs

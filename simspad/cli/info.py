@@ -10,6 +10,9 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+from simspad.cli.describe import describe_dataset, describe_recording
+from simspad.cli.describe_spec import describe_spec
+from simspad.cli.describe_trajectory import describe_trajectory
 from simspad.errors import SimSpadError
 
 _TRAJECTORY_SUFFIXES = (".json", ".csv", ".txt", ".tum")
@@ -31,31 +34,19 @@ def describe(path) -> str:
         raise SimSpadError("no such file or directory", path=path)
     if path.is_dir():
         if (path / "manifest.json").is_file():
-            from simspad.cli.describe import describe_dataset
-
             return describe_dataset(path)
         raise SimSpadError("not a dataset directory (no manifest.json; expected a dataset directory, a spec, "
                            "a trajectory or a recording)", path=path)
     suffix = path.suffix.lower()
     if path.name == "manifest.json":
-        from simspad.cli.describe import describe_dataset
-
         return describe_dataset(path.parent)
     if suffix in _RECORDING_SUFFIXES:
-        from simspad.cli.describe import describe_recording
-
         return describe_recording(path)
     if suffix == ".toml":
         if _is_trajectory_toml(path):
-            from simspad.cli.describe_trajectory import describe_trajectory
-
             return describe_trajectory(path)
-        from simspad.cli.describe_spec import describe_spec
-
         return describe_spec(path)
     if suffix in _TRAJECTORY_SUFFIXES:
-        from simspad.cli.describe_trajectory import describe_trajectory
-
         return describe_trajectory(path)
     raise SimSpadError(f"unknown kind of file {path.suffix or '(no suffix)'!r} (expected a spec .toml, a trajectory "
                        ".toml/.json/.csv/.txt/.tum, a recording .h5 or a dataset directory)", path=path)

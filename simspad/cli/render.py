@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-from simspad.render.renderer import render_sequence
+from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.render.summary import RenderSummary
 from simspad.sensors.presets import SpadParams
 
 
-def render_from_cli(scene, trajectory, **kwargs) -> RenderSummary:
+def render_from_cli(scene, trajectory, *, out_dir, progress: bool, **settings) -> RenderSummary:
     """``simspad render``: :func:`~simspad.render.renderer.render_sequence`, with the keyframe count compared to
-    one render per bin of the SPAD preset."""
-    return render_sequence(scene, trajectory, spad_bin_s=SpadParams().bin_s, **kwargs)
+    one render per bin of the SPAD preset. ``settings``: the fields of :class:`RenderSettings`."""
+    return render_sequence(scene, trajectory, RenderSettings(**settings), out_dir=out_dir, progress=progress,
+                           spad_bin_s=SpadParams().bin_s)
 
 
 def describe_render(summary: RenderSummary) -> str:

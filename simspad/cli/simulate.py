@@ -13,7 +13,7 @@ from pathlib import Path
 
 from simspad.errors import SimSpadError
 from simspad.sensors.presets import SENSOR_KINDS, sensor_params
-from simspad.sensors.simulate import simulate_recording
+from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
 
 def parse_value(text: str):
@@ -83,5 +83,5 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
             params[kind] = sensor_params(kind, None, per_kind[kind])
         except ValueError as exc:
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
-    return simulate_recording(render_dir, out_path, lux=lux, sensors=params, start_s=start_s,
-                              duration_s=duration_s, seed=seed, progress=sys.stderr.isatty())
+    settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed)
+    return simulate_recording(render_dir, out_path, settings, progress=sys.stderr.isatty())

@@ -30,9 +30,11 @@ from typing import Any
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
-from simspad.render.renderer import render_sequence, select_variant
+from simspad.render.mitsuba_env import select_variant
+from simspad.render.renderer import render_sequence
+from simspad.render.settings import RenderSettings
 from simspad.sensors.presets import SpadParams
-from simspad.sensors.simulate import simulate_recording
+from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
 #: Environment variables forwarded to workers (set before Mitsuba/Dr.Jit is imported there): the same libLLVM
 #: and variant everywhere, so renders are bit-identical whichever worker runs them.
@@ -80,9 +82,10 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         final = Path(out_dir) / task.rel_dir
         if not (final / "timeline.json").is_file():
             with atomic_path(final) as tmp:
-                render_sequence(seq.scene, seq.trajectory, duration_s=seq.duration_s, start_s=seq.start_s,
-                                resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
-                                min_rate_hz=seq.min_rate_hz, seed=task.seed, out_dir=tmp, progress=False,
+                settings = RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s,
+                                          resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
+                                          min_rate_hz=seq.min_rate_hz, seed=task.seed)
+                render_sequence(seq.scene, seq.trajectory, settings, out_dir=tmp, progress=False,
                                 spad_bin_s=SpadParams().bin_s)
         return {"ok": True, "seconds": time.perf_counter() - t0, "n_keyframes": _count_keyframes(final),
                 "host": socket.gethostname()}
@@ -109,10 +112,11 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     try:
         _apply_environment(env)
         out_path = Path(out_dir) / task.rel_path
-        simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, lux=task.lux, sensors=dict(task.sensors),
-                           start_s=task.start_s, duration_s=task.duration_s, seed=task.seed,
-                           stream_key=tuple(task.stream_key), gt_rate_hz=task.gt_rate_hz, optics=task.optics,
-                           metadata=dict(task.metadata), progress=False)
+        settings = RecordingSettings(lux=task.lux, sensors=dict(task.sensors), start_s=task.start_s,
+                                     duration_s=task.duration_s, seed=task.seed, stream_key=tuple(task.stream_key),
+                                     gt_rate_hz=task.gt_rate_hz, optics=task.optics)
+        simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, settings, metadata=dict(task.metadata),
+                           progress=False)
         seconds = time.perf_counter() - t0
         return {"ok": True, "seconds": seconds, "size": out_path.stat().st_size, "sha256": file_sha256(out_path),
                 "host": socket.gethostname()}

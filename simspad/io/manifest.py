@@ -27,6 +27,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256  # noqa: F401  (re-exported: manifest readers check files)
@@ -52,8 +54,7 @@ def content_sha256(path: str | Path, *, rows_per_read: int = 4096) -> str:
     place objects differently in the file); :func:`file_sha256` is the stricter, byte-level check the manifest
     records.
     """
-    import h5py
-    import numpy as np
+    import h5py  # deferred: h5py (0.4 s) only for this check; the manifest itself is JSON
 
     h = hashlib.sha256()
 

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from simspad.errors import InputError
-from simspad.motion.generators import handheld_shake, linear_pan, object_rotation, orbit, static_pose
+from simspad.motion.generators import Tremor, handheld_shake, linear_pan, object_rotation, orbit, static_pose
 from simspad.motion.trajectory import (
     CAMERA_BODY,
     QUATERNION_NORM_TOLERANCE,
@@ -201,11 +201,12 @@ def _gen_shake(table, where, source):
     if f_hi < f_lo:
         raise InputError(f"{f_hi!r} is below f_lo_hz = {f_lo!r} (expected f_lo_hz ≤ f_hi_hz)", path=source,
                          field=f"{where}.f_hi_hz")
-    return handheld_shake(p, q, seed=seed, f_lo_hz=f_lo, f_hi_hz=f_hi,
-                          translation_amplitude_m=_number(table, "translation_amplitude_m", where, source, 0.002,
-                                                          non_negative=True),
-                          rotation_amplitude_deg=_number(table, "rotation_amplitude_deg", where, source, 0.5,
-                                                         non_negative=True),
+    tremor = Tremor(f_lo_hz=f_lo, f_hi_hz=f_hi,
+                    translation_amplitude_m=_number(table, "translation_amplitude_m", where, source, 0.002,
+                                                    non_negative=True),
+                    rotation_amplitude_deg=_number(table, "rotation_amplitude_deg", where, source, 0.5,
+                                                   non_negative=True))
+    return handheld_shake(p, q, seed=seed, tremor=tremor,
                           duration_s=_number(table, "duration_s", where, source, 1.0, positive=True),
                           rate_hz=_number(table, "rate_hz", where, source, 0.0, non_negative=True) or None,
                           source=f"{source}:{where}")

@@ -8,6 +8,7 @@ them with ``generator = "<name>"`` (:mod:`simspad.io.trajectory_tables`).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -63,17 +64,41 @@ def orbit(target_m=(0.0, 0.0, 0.0), *, radius_m: float = 1.0, angular_speed_deg_
     return Trajectory.from_matrices(t, mats, source=source)
 
 
+@dataclass(frozen=True)
+class Tremor:
+    """Band and size of hand tremor (:func:`handheld_shake`).
+
+    Attributes
+    ----------
+    f_lo_hz, f_hi_hz : float
+        Frequency band of the sinusoids, Hz (0 < f_lo_hz ≤ f_hi_hz).
+    translation_amplitude_m : float
+        Per-axis RMS of the translation, m.
+    rotation_amplitude_deg : float
+        Per-axis RMS of the rotation, degrees.
+    n_components : int
+        Sinusoids summed per axis.
+    """
+
+    f_lo_hz: float = 1.0
+    f_hi_hz: float = 12.0
+    translation_amplitude_m: float = 0.002
+    rotation_amplitude_deg: float = 0.5
+    n_components: int = 24
+
+
 def handheld_shake(position_m=(0.0, 0.0, 0.0), quaternion_xyzw=(0.0, 0.0, 0.0, 1.0), *, seed: int = 0,
-                   f_lo_hz: float = 1.0, f_hi_hz: float = 12.0, translation_amplitude_m: float = 0.002,
-                   rotation_amplitude_deg: float = 0.5, duration_s: float = 1.0, rate_hz: float | None = None,
-                   n_components: int = 24, source: str = "handheld_shake") -> Trajectory:
+                   tremor: Tremor = Tremor(), duration_s: float = 1.0, rate_hz: float | None = None,
+                   source: str = "handheld_shake") -> Trajectory:
     """Hand tremor around a base pose: seeded band-limited noise.
 
     Each translation axis (world) and each rotation axis (body frame, small-angle rotation vector) is a sum of
-    ``n_components`` sinusoids with frequencies drawn uniformly in ``[f_lo_hz, f_hi_hz]``, random phases and
-    Rayleigh-distributed weights, scaled so that the per-axis RMS (over an infinite time) equals
-    ``translation_amplitude_m`` (m) and ``rotation_amplitude_deg`` (deg). Deterministic for a given ``seed``.
+    ``tremor.n_components`` sinusoids with frequencies drawn uniformly in ``[tremor.f_lo_hz, tremor.f_hi_hz]``,
+    random phases and Rayleigh-distributed weights, scaled so that the per-axis RMS (over an infinite time)
+    equals ``tremor.translation_amplitude_m`` (m) and ``tremor.rotation_amplitude_deg`` (deg). Deterministic
+    for a given ``seed``.
     """
+    f_lo_hz, f_hi_hz, n_components = tremor.f_lo_hz, tremor.f_hi_hz, tremor.n_components
     if not 0 < f_lo_hz <= f_hi_hz:
         raise ValueError(f"handheld_shake: expected 0 < f_lo_hz ≤ f_hi_hz, got {f_lo_hz}, {f_hi_hz}")
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5A4E]))
@@ -90,8 +115,8 @@ def handheld_shake(position_m=(0.0, 0.0, 0.0), quaternion_xyzw=(0.0, 0.0, 0.0, 1
         return np.einsum("ak,akn->na", weights,
                          np.sin(2 * np.pi * freqs[:, :, None] * t[None, None, :] + phases[:, :, None]))
 
-    dp = band_noise(translation_amplitude_m)
-    dr = band_noise(np.deg2rad(rotation_amplitude_deg))
+    dp = band_noise(tremor.translation_amplitude_m)
+    dr = band_noise(np.deg2rad(tremor.rotation_amplitude_deg))
     p = np.asarray(position_m, dtype=np.float64) + dp
     q = (Rotation.from_quat(quaternion_xyzw) * Rotation.from_rotvec(dr)).as_quat()
     return Trajectory(t, p, q, source=source)

@@ -84,8 +84,8 @@ def photons_per_lux(illuminant: str | float = DEFAULT_ILLUMINANT) -> float:
     ValueError
         Unknown illuminant name.
     """
-    import colour
-    from colour.constants import CONSTANT_K_M, CONSTANT_LIGHT_SPEED, CONSTANT_PLANCK
+    import colour  # deferred: colour-science takes ~2.5 s to import; called once per illuminant (cached)
+    from colour.constants import CONSTANT_K_M, CONSTANT_LIGHT_SPEED, CONSTANT_PLANCK  # deferred: as above
 
     lef = colour.SDS_LEFS[PHOTOPIC_LEF]
     if isinstance(illuminant, (int, float, np.floating)):
@@ -110,7 +110,7 @@ def photons_per_lux(illuminant: str | float = DEFAULT_ILLUMINANT) -> float:
 
 @functools.lru_cache(maxsize=1)
 def _rgb_to_y_weights() -> np.ndarray:
-    import colour
+    import colour  # deferred: colour-science takes ~2.5 s to import; called once (cached)
 
     return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1], dtype=np.float32)
 

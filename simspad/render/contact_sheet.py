@@ -20,7 +20,7 @@ from simspad.io.trajectory_files import load_trajectory
 from simspad.physics.colour import srgb_encode
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.timeline import Timeline
-from simspad.render.renderer import render_sequence
+from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.scenes.library import resolve_scene
 
 #: Size of one tile (width, height) in pixels and its samples per pixel.
@@ -57,8 +57,9 @@ def render_preview(scene, resolution=TILE_SIZE, spp: int = TILE_SPP, seed: int =
     info = resolve_scene(scene)
     t0 = load_trajectory(info.default_trajectory).t_start if info.default_trajectory else 0.0
     with tempfile.TemporaryDirectory(prefix="simspad-sheet-") as tmp:
-        render_sequence(info, None, duration_s=1e-3, start_s=t0, resolution=resolution, spp=spp, seed=seed,
-                        max_flow_px=1e6, min_rate_hz=1e3, out_dir=Path(tmp) / "render", progress=False)
+        render_sequence(info, None, RenderSettings(duration_s=1e-3, start_s=t0, resolution=resolution, spp=spp,
+                                                   seed=seed, max_flow_px=1e6, min_rate_hz=1e3),
+                        out_dir=Path(tmp) / "render", progress=False)
         return np.array(Timeline.open(Path(tmp) / "render").rgb_keyframe(0), dtype=np.float32)
 
 

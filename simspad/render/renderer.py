@@ -13,8 +13,6 @@ of everything that determines its pixels, so re-runs re-use frames and an interr
 from __future__ import annotations
 
 import hashlib
-import math
-import numbers
 import sys
 import time
 from pathlib import Path
@@ -23,7 +21,6 @@ from typing import NamedTuple
 import numpy as np
 from tqdm import tqdm
 
-from simspad import defaults
 from simspad.errors import SimSpadError
 from simspad.io.render_dir import write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
@@ -40,10 +37,11 @@ from simspad.render.mitsuba_scene import (
     sampler_for,
 )
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
+from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
 from simspad.scenes.library import content_hash, resolve_scene
 
-__all__ = ["RenderSummary", "render_sequence", "select_variant"]
+__all__ = ["RenderSettings", "RenderSummary", "render_sequence", "select_variant"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
 RENDERER_VERSION = 5
@@ -52,32 +50,6 @@ SPAN_TOLERANCE_S = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------------- inputs
-def _check_settings(duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed):
-    def bad(field_name, message):
-        raise SimSpadError(message, field=field_name)
-
-    if not (isinstance(duration_s, numbers.Real) and math.isfinite(duration_s) and duration_s > 0):
-        bad("duration", f"must be a number of seconds > 0, got {duration_s!r}")
-    if not (isinstance(start_s, numbers.Real) and math.isfinite(start_s)):
-        bad("start", f"must be a finite number of seconds, got {start_s!r}")
-    try:
-        width, height = (int(v) for v in resolution)
-    except (TypeError, ValueError):
-        bad("resolution", f"expected (width, height), got {resolution!r}")
-    if width <= 0 or height <= 0:
-        bad("resolution", f"width and height must be positive, got {resolution!r}")
-    if not (isinstance(spp, numbers.Integral) and spp >= 1):
-        bad("spp", f"must be an integer >= 1, got {spp!r}")
-    if not (max_flow_px > 0):
-        bad("max_flow_px", f"must be > 0 pixels, got {max_flow_px!r}")
-    if not (min_rate_hz > 0):
-        bad("min_rate_hz", f"must be > 0 Hz, got {min_rate_hz!r}")
-    if not isinstance(seed, numbers.Integral) or seed < 0:
-        bad("seed", f"must be an integer >= 0, got {seed!r}")
-    return width, height
-
-
-
 def _load_trajectory(trajectory, scene_info):
     if isinstance(trajectory, TrajectorySet):
         return trajectory, trajectory.source, _trajectory_set_hash(trajectory)
@@ -109,10 +81,8 @@ def _check_span(ts, source: str, start_s: float, end_s: float) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------- render
-def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float = 0.0, resolution=defaults.RESOLUTION_PX,
-                    spp: int = defaults.SPP, max_flow_px: float = defaults.MAX_FLOW_PX,
-                    min_rate_hz: float = defaults.MIN_KEYFRAME_RATE_HZ, seed: int = defaults.SEED,
-                    out_dir, progress: bool = True, variant: str | None = None,
+def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
+                    progress: bool = True, variant: str | None = None,
                     spad_bin_s: float | None = None) -> RenderSummary:
     """Render radiance keyframes of ``scene`` along ``trajectory`` into a render directory (DESIGN §5).
 
@@ -122,18 +92,8 @@ def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float
         Built-in scene name, a user's Mitsuba scene folder or ``.xml``.
     trajectory : str, Path, TrajectorySet or None
         Trajectory file (or loaded set); None: the scene's default trajectory (static if it has none).
-    duration_s, start_s : float
-        The rendered span [start_s, start_s + duration_s], seconds.
-    resolution : (int, int)
-        Width, height in pixels.
-    spp : int
-        Samples per pixel of the radiance pass.
-    max_flow_px : float
-        Largest predicted image motion between consecutive keyframes, pixels.
-    min_rate_hz : float
-        Keyframes are at most ``1 / min_rate_hz`` apart.
-    seed : int
-        Render seed, the same for every frame (noise frozen in screen space).
+    settings : RenderSettings
+        Span, resolution, samples per pixel, keyframe-schedule limits and seed.
     out_dir : str or Path
         Render directory; frames already there with the same cache key are re-used.
     progress : bool
@@ -155,7 +115,9 @@ def render_sequence(scene, trajectory=None, *, duration_s: float, start_s: float
         Bad settings, unknown scene, missing camera id, trajectory not covering the span, unwritable output;
         raised before anything is written.
     """
-    width, height = _check_settings(duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed)
+    width, height = settings.checked_size()
+    duration_s, start_s, spp, seed = settings.duration_s, settings.start_s, settings.spp, settings.seed
+    max_flow_px, min_rate_hz = settings.max_flow_px, settings.min_rate_hz
     spp, seed, max_flow_px, min_rate_hz = int(spp), int(seed), float(max_flow_px), float(min_rate_hz)
     out_dir = Path(out_dir)
     created = make_out_dir(out_dir)

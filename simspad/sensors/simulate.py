@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,11 +31,42 @@ from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs
 _TIME_TOLERANCE_S = 1e-9
 
 
-def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start_s: float | None = None,
-                       duration_s: float | None = None, seed: int | np.random.SeedSequence = 0,
-                       stream_key: tuple = (), gt_rate_hz: float = defaults.GT_RATE_HZ, optics: Optics | None = None,
-                       metadata: dict | None = None, progress: bool = False) -> Path:
-    """Simulate ``sensors`` on a render directory at ``lux`` and write the recording ``out_path``.
+@dataclass(frozen=True)
+class RecordingSettings:
+    """What one recording simulates: light level, sensors, interval, random stream, ground truth and optics.
+
+    Attributes
+    ----------
+    lux : float
+        Scene illuminance, lx (> 0).
+    sensors : dict
+        ``{kind: params}`` with kind in ``"spad"``, ``"frames"``, ``"events"`` and the parameter dataclass of
+        :func:`simspad.sensors.presets.sensor_params`.
+    start_s, duration_s : float, optional
+        Interval to simulate, s; default from the first to the last keyframe.
+    seed : int or SeedSequence
+        Dataset seed; each sensor draws from ``child_rng(seed, *stream_key, kind)``.
+    stream_key : tuple
+        Stable key of this recording (e.g. ``(sequence, lux)``).
+    gt_rate_hz : float
+        Ground-truth frame rate, Hz.
+    optics : Optics, optional
+        Lens and illuminant (default ``Optics()``).
+    """
+
+    lux: float
+    sensors: dict
+    start_s: float | None = None
+    duration_s: float | None = None
+    seed: int | np.random.SeedSequence = 0
+    stream_key: tuple = ()
+    gt_rate_hz: float = defaults.GT_RATE_HZ
+    optics: Optics | None = None
+
+
+def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, metadata: dict | None = None,
+                       progress: bool = False) -> Path:
+    """Simulate ``settings.sensors`` on a render directory at ``settings.lux`` and write the recording ``out_path``.
 
     Parameters
     ----------
@@ -42,21 +74,8 @@ def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start
         Render directory (DESIGN §5).
     out_path : str or Path
         Recording to write (``.h5``); written to a temporary name and renamed when complete.
-    lux : float
-        Scene illuminance, lx (> 0).
-    sensors : dict
-        ``{kind: params}`` with kind in ``"spad"``, ``"frames"``, ``"events"`` and the parameter dataclass of
-        :func:`simspad.sensors.presets.sensor_params`.
-    start_s, duration_s : float, optional
-        Interval to simulate; default from the first to the last keyframe.
-    seed : int or SeedSequence
-        Dataset seed; each sensor draws from ``child_rng(seed, *stream_key, kind)``.
-    stream_key : tuple
-        Stable key of this recording (e.g. ``(sequence, lux)``).
-    gt_rate_hz : float
-        Ground-truth frame rate.
-    optics : Optics, optional
-        Lens and illuminant (default ``Optics()``).
+    settings : RecordingSettings
+        Lux, sensors and their parameters, interval, seed and stream key, ground-truth rate, optics.
     metadata : dict, optional
         Root attributes to add or override (``scene``, ``trajectory``, ``sequence``, ``spec`` (dict or JSON
         text), ``created_utc`` — pass a fixed value for byte-identical files).
@@ -73,23 +92,24 @@ def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start
     SimSpadError
         Bad lux, interval, sensor kind or parameter; InputError for a malformed render directory.
     """
+    lux, sensors, seed, stream_key = settings.lux, settings.sensors, settings.seed, settings.stream_key
     if not (isinstance(lux, (int, float)) and math.isfinite(lux) and lux > 0):
         raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="lux")
     for kind in sensors:
         if kind not in SENSOR_KINDS:
             raise SimSpadError(f"unknown sensor {kind!r} (expected one of {', '.join(SENSOR_KINDS)})",
                                field="sensors")
-    optics = optics or Optics()
+    optics = settings.optics or Optics()
+    settings = replace(settings, optics=optics)
     out_path = Path(out_path)
     tl = Timeline.open(render_dir)
     _validate_sensors(sensors, tl.height)
-    t0, t1 = _interval(tl, start_s, duration_s, render_dir)
+    t0, t1 = _interval(tl, settings.start_s, settings.duration_s, render_dir)
     flux_tl = tl.photon_flux(lux, optics)
     runners = {"spad": lambda w, p, rng: spad.simulate_spad(w, flux_tl, t0, t1, p, rng, progress),
                "frames": lambda w, p, rng: frames.simulate_frames(w, flux_tl, t0, t1, p, rng, progress),
                "events": lambda w, p, rng: events.simulate_events(w, flux_tl, t0, t1, p, rng, lux, progress)}
-    attrs = _root_attrs(tl, render_dir, lux=lux, sensors=sensors, t0=t0, t1=t1, seed=seed, stream_key=stream_key,
-                        gt_rate_hz=gt_rate_hz, optics=optics, flux_scale=flux_tl.scale, metadata=metadata)
+    attrs = _root_attrs(tl, render_dir, settings, t0=t0, t1=t1, flux_scale=flux_tl.scale, metadata=metadata)
     common = {"lux": float(lux), "flux_scale": float(flux_tl.scale),
               **{f"optics_{k}": v for k, v in optics.to_attrs().items()}}
     with RecordingWriter(out_path, attrs) as writer:
@@ -97,7 +117,7 @@ def simulate_recording(render_dir, out_path, *, lux: float, sensors: dict, start
             if kind in sensors:
                 runners[kind](writer, sensors[kind], child_rng(seed, *stream_key, kind))
                 writer.set_attrs(kind, **common)
-        write_ground_truth(writer, flux_tl, t0, t1, gt_rate_hz)
+        write_ground_truth(writer, flux_tl, t0, t1, settings.gt_rate_hz)
         writer.set_attrs("gt", **common)
     return out_path
 
@@ -130,8 +150,10 @@ def _interval(tl: Timeline, start_s, duration_s, render_dir) -> tuple[float, flo
     return t0, min(t0 + d, tl.t_end)
 
 
-def _root_attrs(tl: Timeline, render_dir, *, lux, sensors, t0, t1, seed, stream_key, gt_rate_hz, optics,
-                flux_scale, metadata) -> dict:
+def _root_attrs(tl: Timeline, render_dir, settings: RecordingSettings, *, t0, t1, flux_scale, metadata) -> dict:
+    """Root attributes of the recording; ``settings.optics`` already resolved (not None)."""
+    lux, sensors, seed, stream_key = settings.lux, settings.sensors, settings.seed, settings.stream_key
+    gt_rate_hz, optics = settings.gt_rate_hz, settings.optics
     meta = dict(metadata or {})
     scene = tl.meta.get("scene", "")
     trajectory = tl.meta.get("trajectory", "")

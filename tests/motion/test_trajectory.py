@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from simspad.cli import main
 from simspad.errors import InputError
 from simspad.io.trajectory_files import load_trajectory, save_trajectory
-from simspad.motion.generators import handheld_shake, linear_pan, object_rotation, orbit, static_pose
+from simspad.motion.generators import Tremor, handheld_shake, linear_pan, object_rotation, orbit, static_pose
 from simspad.motion.summary import motion_summary
 from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 
@@ -223,8 +223,8 @@ def test_cli_reports_malformed_trajectory_in_one_line(tmp_path, capsys):
 
 def test_handheld_shake_amplitude_band_and_seed():
     f_lo, f_hi, amp_m, amp_deg, dur = 3.0, 11.0, 0.002, 0.4, 20.0
-    tr = handheld_shake(seed=11, f_lo_hz=f_lo, f_hi_hz=f_hi, translation_amplitude_m=amp_m,
-                        rotation_amplitude_deg=amp_deg, duration_s=dur)
+    tremor = Tremor(f_lo_hz=f_lo, f_hi_hz=f_hi, translation_amplitude_m=amp_m, rotation_amplitude_deg=amp_deg)
+    tr = handheld_shake(seed=11, tremor=tremor, duration_s=dur)
     rate = 500.0
     t = np.arange(0, dur, 1 / rate)
     x = tr.position(t)
@@ -240,10 +240,8 @@ def test_handheld_shake_amplitude_band_and_seed():
         df = freqs[1]
         inside = (freqs >= f_lo - 3 * df) & (freqs <= f_hi + 3 * df)
         assert power[inside].sum() / power.sum() > 0.999
-    same = handheld_shake(seed=11, f_lo_hz=f_lo, f_hi_hz=f_hi, translation_amplitude_m=amp_m,
-                          rotation_amplitude_deg=amp_deg, duration_s=dur)
-    other = handheld_shake(seed=12, f_lo_hz=f_lo, f_hi_hz=f_hi, translation_amplitude_m=amp_m,
-                           rotation_amplitude_deg=amp_deg, duration_s=dur)
+    same = handheld_shake(seed=11, tremor=tremor, duration_s=dur)
+    other = handheld_shake(seed=12, tremor=tremor, duration_s=dur)
     assert np.array_equal(same.positions_m, tr.positions_m)
     assert not np.allclose(other.positions_m, tr.positions_m)
 

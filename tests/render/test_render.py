@@ -5,6 +5,7 @@ Scenes are tiny Mitsuba XML folders written into ``tmp_path`` (≤ 48×32 px, �
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from simspad.physics import radiometry as rad
 from simspad.radiance.timeline import Timeline
 from simspad.render import schedule as sch
 from simspad.render.mitsuba_scene import CompileCounter, emitter_order, load_canonical
-from simspad.render.renderer import render_sequence, select_variant
+from simspad.render.renderer import RenderSettings, render_sequence, select_variant
 from simspad.scenes.library import resolve_scene, scene_dict_or_file
 from simspad.sensors.presets import SpadParams
 
@@ -78,8 +79,9 @@ def _variant():
 def test_flat_grey_scene_at_E_lux_has_mean_luminance_0_18_E_over_pi(tmp_path):
     lux = 50.0
     folder = _scene_folder(tmp_path / "grey", env=lux / math.pi)  # uniform sky radiance L gives E = π·L
-    summary = render_sequence(folder, None, duration_s=0.002, resolution=(W, H), spp=4, min_rate_hz=1000.0,
-                              out_dir=tmp_path / "r", progress=False)
+    summary = render_sequence(folder, None, RenderSettings(duration_s=0.002, resolution=(W, H), spp=4,
+                                                           min_rate_hz=1000.0), out_dir=tmp_path / "r",
+                              progress=False)
     tl = Timeline.open(summary.out_dir)
     mean_y = float(tl.keyframe(0).mean(dtype=np.float64))
     assert mean_y == pytest.approx(0.18 * lux / math.pi, rel=0.02)
@@ -91,16 +93,16 @@ def test_flat_grey_scene_at_E_lux_has_mean_luminance_0_18_E_over_pi(tmp_path):
 # ------------------------------------------------------------------------------------------ noise, kernels
 def test_noise_is_frozen_and_renders_are_deterministic(tmp_path):
     folder = _textured_folder(tmp_path / "tex")
-    a = render_sequence(folder, None, duration_s=0.002, resolution=(W, H), spp=2, out_dir=tmp_path / "a",
-                        progress=False)
-    b = render_sequence(folder, None, duration_s=0.002, resolution=(W, H), spp=2, out_dir=tmp_path / "b",
-                        progress=False)
+    a = render_sequence(folder, None, RenderSettings(duration_s=0.002, resolution=(W, H), spp=2),
+                        out_dir=tmp_path / "a", progress=False)
+    b = render_sequence(folder, None, RenderSettings(duration_s=0.002, resolution=(W, H), spp=2),
+                        out_dir=tmp_path / "b", progress=False)
     ta, tb = Timeline.open(a.out_dir), Timeline.open(b.out_dir)
     # Static camera: every instant gives the same noise pattern (no flicker), and re-renders are bit-identical.
     np.testing.assert_array_equal(ta.rgb_keyframe(0), ta.rgb_keyframe(ta.n_keyframes - 1))
     np.testing.assert_array_equal(ta.rgb_keyframe(1), tb.rgb_keyframe(1))
-    c = render_sequence(folder, None, duration_s=0.002, resolution=(W, H), spp=2, seed=1, out_dir=tmp_path / "c",
-                        progress=False)
+    c = render_sequence(folder, None, RenderSettings(duration_s=0.002, resolution=(W, H), spp=2, seed=1),
+                        out_dir=tmp_path / "c", progress=False)
     assert not np.array_equal(Timeline.open(c.out_dir).rgb_keyframe(0), ta.rgb_keyframe(0))
 
 
@@ -108,7 +110,7 @@ def test_no_kernel_recompilation_while_only_poses_change(tmp_path, _variant):
     if not _variant.startswith("llvm"):
         pytest.skip("kernel compilation is counted on the LLVM variant only")
     folder = _textured_folder(tmp_path / "tex")
-    s = render_sequence(folder, _pan(), duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=200.0,
+    s = render_sequence(folder, _pan(), RenderSettings(duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=200.0),
                         out_dir=tmp_path / "r", progress=False)
     assert s.n_rendered >= 6
     assert s.compiled_after_first == 0, s
@@ -140,14 +142,14 @@ def test_simspad_render_compares_with_the_spad_preset_bin(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------ cache, resume
 def test_cache_reuse_resume_and_invalidation(tmp_path):
     folder = _textured_folder(tmp_path / "tex")
-    kwargs = dict(duration_s=0.05, resolution=(W, H), spp=2, min_rate_hz=100.0, out_dir=tmp_path / "r",
-                  progress=False)
-    first = render_sequence(folder, _pan(), **kwargs)
+    settings = RenderSettings(duration_s=0.05, resolution=(W, H), spp=2, min_rate_hz=100.0)
+    kwargs = dict(out_dir=tmp_path / "r", progress=False)
+    first = render_sequence(folder, _pan(), settings, **kwargs)
     doc = (tmp_path / "r" / "timeline.json").read_text()
     frames = sorted((tmp_path / "r" / "frames").iterdir())
     reference = Timeline.open(tmp_path / "r").rgb_keyframe(2)
 
-    again = render_sequence(folder, _pan(), **kwargs)
+    again = render_sequence(folder, _pan(), settings, **kwargs)
     assert (again.n_rendered, again.n_reused) == (0, first.n_keyframes)
     assert (tmp_path / "r" / "timeline.json").read_text() == doc
 
@@ -155,12 +157,12 @@ def test_cache_reuse_resume_and_invalidation(tmp_path):
     (tmp_path / "r" / "timeline.json").unlink()
     frames[2].unlink()
     frames[-1].unlink()
-    resumed = render_sequence(folder, _pan(), **kwargs)
+    resumed = render_sequence(folder, _pan(), settings, **kwargs)
     assert (resumed.n_rendered, resumed.n_reused) == (2, first.n_keyframes - 2)
     np.testing.assert_array_equal(Timeline.open(tmp_path / "r").rgb_keyframe(2), reference)
 
     # Another setting: everything is rendered anew and the old frames are removed.
-    other = render_sequence(folder, _pan(), **dict(kwargs, spp=3))
+    other = render_sequence(folder, _pan(), replace(settings, spp=3), **kwargs)
     assert other.n_reused == 0
     assert len(list((tmp_path / "r" / "frames").iterdir())) == other.n_keyframes
     assert not list((tmp_path / "r").glob(".*tmp*")) and not list((tmp_path / "r" / "frames").glob(".*"))
@@ -225,8 +227,9 @@ def test_schedule_respects_max_flow_on_a_rendered_pan(tmp_path):
     folder = _scene_folder(tmp_path / "patch", reflectance='<rgb name="reflectance" value="0.0"/>', extra=patch)
     speed_px_s = sch.focal_length_px(FOV_DEG, W) * 1.0 / CAMERA_Z
     duration = 4.0 / speed_px_s  # a 4 px pan
-    s = render_sequence(folder, _pan((1.0, 0.0, 0.0), duration_s=0.2), duration_s=duration, resolution=(W, H),
-                        spp=8, max_flow_px=0.5, min_rate_hz=1.0, out_dir=tmp_path / "r", progress=False)
+    settings = RenderSettings(duration_s=duration, resolution=(W, H), spp=8, max_flow_px=0.5, min_rate_hz=1.0)
+    s = render_sequence(folder, _pan((1.0, 0.0, 0.0), duration_s=0.2), settings, out_dir=tmp_path / "r",
+                        progress=False)
     tl = Timeline.open(s.out_dir)
     assert s.max_predicted_flow_px <= 0.5 + 1e-6
     assert tl.n_keyframes >= 9  # 4 px in steps of at most 0.5 px
@@ -247,7 +250,7 @@ def test_object_trajectory_moves_the_mesh(tmp_path):
     folder = _scene_folder(tmp_path / "obj", reflectance='<rgb name="reflectance" value="0.5"/>', extra=cube)
     box = Trajectory([0.0, 0.01], [[-0.3, 0.0, 0.5], [0.3, 0.0, 0.5]], [[0, 0, 0, 1], [0, 0, 0, 1]])
     ts = TrajectorySet(camera=None, objects={"box": box}, source="<box>")
-    s = render_sequence(folder, ts, duration_s=0.01, resolution=(W, H), spp=4, min_rate_hz=200.0,
+    s = render_sequence(folder, ts, RenderSettings(duration_s=0.01, resolution=(W, H), spp=4, min_rate_hz=200.0),
                         out_dir=tmp_path / "r", progress=False)
     tl = Timeline.open(s.out_dir)
     focal = sch.focal_length_px(FOV_DEG, W)
@@ -270,22 +273,24 @@ def test_bad_input_is_one_clear_error_and_nothing_is_written(tmp_path):
     folder = _scene_folder(tmp_path / "grey")
     out = tmp_path / "out"
     with pytest.raises(SimSpadError, match="unknown scene 'no-such-scene'"):
-        render_sequence("no-such-scene", None, duration_s=0.01, out_dir=out, progress=False)
+        render_sequence("no-such-scene", None, RenderSettings(duration_s=0.01), out_dir=out, progress=False)
     bad_cam = _scene_folder(tmp_path / "badcam", toml='camera_id = "missing"\n')
     with pytest.raises(SimSpadError, match="no sensor with id 'missing'") as info:
-        render_sequence(bad_cam, None, duration_s=0.01, resolution=(W, H), out_dir=out, progress=False)
+        render_sequence(bad_cam, None, RenderSettings(duration_s=0.01, resolution=(W, H)), out_dir=out,
+                        progress=False)
     assert "camera_id" in str(info.value)
     with pytest.raises(SimSpadError, match=r"covers \[0, 0.2\] s but the render needs \[0.1, 0.4\] s"):
-        render_sequence(folder, _pan(), start_s=0.1, duration_s=0.3, resolution=(W, H), out_dir=out, progress=False)
+        render_sequence(folder, _pan(), RenderSettings(start_s=0.1, duration_s=0.3, resolution=(W, H)), out_dir=out,
+                        progress=False)
     with pytest.raises(SimSpadError, match="no shape with that id"):
-        render_sequence(folder, TrajectorySet(None, {"ghost": static_pose()}, "<ghost>"), duration_s=0.01,
-                        resolution=(W, H), out_dir=out, progress=False)
+        render_sequence(folder, TrajectorySet(None, {"ghost": static_pose()}, "<ghost>"),
+                        RenderSettings(duration_s=0.01, resolution=(W, H)), out_dir=out, progress=False)
     blocker = tmp_path / "a-file"
     blocker.write_text("x")
     with pytest.raises(SimSpadError, match="not a directory"):
-        render_sequence(folder, None, duration_s=0.01, out_dir=blocker / "sub", progress=False)
+        render_sequence(folder, None, RenderSettings(duration_s=0.01), out_dir=blocker / "sub", progress=False)
     with pytest.raises(SimSpadError, match="spp"):
-        render_sequence(folder, None, duration_s=0.01, spp=0, out_dir=out, progress=False)
+        render_sequence(folder, None, RenderSettings(duration_s=0.01, spp=0), out_dir=out, progress=False)
     assert not out.exists()
 
 

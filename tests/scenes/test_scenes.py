@@ -16,7 +16,7 @@ from simspad.errors import SimSpadError
 from simspad.io.trajectory_files import load_trajectory
 from simspad.radiance.timeline import Timeline
 from simspad.render.contact_sheet import LABEL_HEIGHT_PX, tone_map, write_contact_sheet
-from simspad.render.renderer import render_sequence
+from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.scenes.library import builtin_scene_names, list_scenes, resolve_scene
 
 REQUIRED = {"office", "piano", "plant", "siemens-star", "fan"}
@@ -27,8 +27,9 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 def _render(scene, out_dir, *, duration_s=1e-3, min_rate_hz=1e3, trajectory=None, spp=SPP):
     """Render the span [0, duration_s] with keyframes only at its ends; returns the opened Timeline."""
-    render_sequence(scene, trajectory, duration_s=duration_s, resolution=SIZE, spp=spp, max_flow_px=1e6,
-                    min_rate_hz=min_rate_hz, out_dir=out_dir, progress=False)
+    render_sequence(scene, trajectory, RenderSettings(duration_s=duration_s, resolution=SIZE, spp=spp,
+                                                      max_flow_px=1e6, min_rate_hz=min_rate_hz), out_dir=out_dir,
+                    progress=False)
     return Timeline.open(out_dir)
 
 
@@ -146,8 +147,8 @@ def test_unknown_scene_is_refused_before_anything_is_written(tmp_path):
     with pytest.raises(SimSpadError, match="unknown scene 'no-such-scene'"):
         resolve_scene("no-such-scene")
     with pytest.raises(SimSpadError, match="no-such-scene"):
-        render_sequence("no-such-scene", None, duration_s=1e-3, resolution=SIZE, spp=1, out_dir=tmp_path / "r",
-                        progress=False)
+        render_sequence("no-such-scene", None, RenderSettings(duration_s=1e-3, resolution=SIZE, spp=1),
+                        out_dir=tmp_path / "r", progress=False)
     assert not (tmp_path / "r").exists()
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from simspad.physics.radiometry import Optics, flux_scale
 from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import sensor_params
 from simspad.cli.simulate import parse_overrides, parse_value
-from simspad.sensors.simulate import simulate_recording
+from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
 H, W = 12, 20
 TIMES = np.array([0.0, 0.0013, 0.0029, 0.004])
@@ -45,8 +46,8 @@ def _sensors(**spad):
 
 
 def test_recording_layout_and_ground_truth(render_dir, tmp_path):
-    out = simulate_recording(render_dir, tmp_path / "rec.h5", lux=10.0, sensors=_sensors(), seed=4,
-                             stream_key=("unit", 10.0), gt_rate_hz=1000.0)
+    out = simulate_recording(render_dir, tmp_path / "rec.h5", RecordingSettings(
+        lux=10.0, sensors=_sensors(), seed=4, stream_key=("unit", 10.0), gt_rate_hz=1000.0))
     tl = Timeline.open(render_dir)
     with open_recording(out) as rec:
         a = rec.attrs
@@ -92,10 +93,10 @@ def test_recording_layout_and_ground_truth(render_dir, tmp_path):
 
 def test_determinism_same_seed_same_bytes(render_dir, tmp_path):
     meta = {"created_utc": "2026-01-01T00:00:00Z"}
-    kw = dict(lux=3.0, sensors=_sensors(), seed=9, stream_key=("s", 3.0), metadata=meta)
-    a = simulate_recording(render_dir, tmp_path / "a.h5", **kw)
-    b = simulate_recording(render_dir, tmp_path / "b.h5", **kw)
-    c = simulate_recording(render_dir, tmp_path / "c.h5", **{**kw, "seed": 10})
+    settings = RecordingSettings(lux=3.0, sensors=_sensors(), seed=9, stream_key=("s", 3.0))
+    a = simulate_recording(render_dir, tmp_path / "a.h5", settings, metadata=meta)
+    b = simulate_recording(render_dir, tmp_path / "b.h5", settings, metadata=meta)
+    c = simulate_recording(render_dir, tmp_path / "c.h5", replace(settings, seed=10), metadata=meta)
     digest = [hashlib.sha256(p.read_bytes()).hexdigest() for p in (a, b, c)]
     assert digest[0] == digest[1]
     with open_recording(a) as ra, open_recording(c) as rc:
@@ -103,8 +104,9 @@ def test_determinism_same_seed_same_bytes(render_dir, tmp_path):
 
 
 def test_fixed_gate_and_sensor_subset(render_dir, tmp_path):
-    out = simulate_recording(render_dir, tmp_path / "s.h5", lux=1.0, sensors={"spad": _sensors(gate_s=1e-6)["spad"]},
-                             start_s=0.001, duration_s=0.002)
+    settings = RecordingSettings(lux=1.0, sensors={"spad": _sensors(gate_s=1e-6)["spad"]}, start_s=0.001,
+                                 duration_s=0.002)
+    out = simulate_recording(render_dir, tmp_path / "s.h5", settings)
     with open_recording(out) as rec:
         assert rec.sensors == ("spad",) and rec.spad.attrs["gate_s"] == 1e-6 and not rec.spad.attrs["gate_auto"]
         assert np.isclose(rec.spad.t_start[0], 0.001) and np.isclose(rec.duration_s, 0.002)
