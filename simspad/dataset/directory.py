@@ -21,7 +21,7 @@ import shutil
 from pathlib import Path
 
 from simspad.errors import SimSpadError
-from simspad.io.manifest import utc_now
+from simspad.io.provenance import utc_now
 
 LOCK_NAME = ".simspad.lock"
 RENDERS_DIR = "renders"

@@ -17,10 +17,9 @@ from simspad.io.manifest import (
     VERSION,
     manifest_path,
     read_manifest,
-    utc_now,
     write_manifest,
 )
-from simspad.io.provenance import source_date_epoch
+from simspad.io.provenance import source_date_epoch, utc_now
 
 
 def dataset_created_utc(previous: dict | None, override: str | None) -> str:

@@ -1,4 +1,4 @@
-"""Content hashes: of a file's bytes and of JSON-able values in one canonical form."""
+"""SHA-256 of a file's bytes, read in blocks (the manifest's check that a file is the one it describes)."""
 
 from __future__ import annotations
 

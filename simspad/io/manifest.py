@@ -31,8 +31,7 @@ import numpy as np
 
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
-from simspad.io.hashing import file_sha256  # noqa: F401  (re-exported: manifest readers check files)
-from simspad.io.provenance import utc_now  # noqa: F401  (re-exported)
+from simspad.io.hashing import file_sha256
 
 MANIFEST_NAME = "manifest.json"
 FORMAT = "simspad-dataset"
@@ -135,7 +134,7 @@ def validate_manifest(data: Any, path: str | Path) -> None:
             raise InputError("expected an object", path=path, field=f"recordings[{i}]")
         for key, typ in (("sequence", str), ("path", str), ("status", str), ("lux", (int, float))):
             if not isinstance(rec.get(key), typ):
-                raise InputError(f"missing or of the wrong type", path=path, field=f"recordings[{i}].{key}")
+                raise InputError("missing or of the wrong type", path=path, field=f"recordings[{i}].{key}")
         if rec["status"] not in STATUSES:
             raise InputError(f"expected one of {', '.join(STATUSES)}, got {rec['status']!r}", path=path,
                              field=f"recordings[{i}].status")

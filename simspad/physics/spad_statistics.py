@@ -1,6 +1,6 @@
 """The gated binary SPAD's response and its maximum-likelihood inverse (DESIGN §4).
 
-One place for the formulas that the simulator (``sensors/spad.py``) and the methods
+One place for the formulas that the simulator (``sensors/spad/``) and the methods
 (``methods/spad_response.py``) share; it imports nothing else of SimSPAD, so the methods' wall (they read only
 recordings, never the simulator) holds. Every function takes the same arguments in the same order:
 ``q_m2 = qe·fill_factor·pixel_pitch_m²`` is the detection area (detections s⁻¹ per photon s⁻¹ m⁻², so ``q·Φ`` is

@@ -20,7 +20,8 @@ from simspad.dataset.executors import ExecutorConfig
 from simspad.dataset.generate import generate
 from simspad.dataset.spec_validation import load_spec
 from simspad.errors import InputError, SimSpadError
-from simspad.io.manifest import content_sha256, file_sha256, read_manifest
+from simspad.io.hashing import file_sha256
+from simspad.io.manifest import content_sha256, read_manifest
 
 CREATED = "2025-01-01T00:00:00Z"
 SCENE = "siemens-star"
