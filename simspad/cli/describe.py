@@ -10,32 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
+from simspad.cli.text import format_bytes, format_duration_s, recording_table
 from simspad.io.manifest import read_manifest
 from simspad.io.recording import open_recording
 
 _SPAD_SAMPLE_BINS = 1024
 """Binary frames read to estimate the mean detection probability (cheap: the file is not read whole)."""
-
-
-def _fmt_bytes(n) -> str:
-    if n is None:
-        return "-"
-    n = float(n)
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if n < 1024 or unit == "TiB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} TiB"
-
-
-def _fmt_time(x) -> str:
-    if isinstance(x, str):
-        return x
-    x = float(x)
-    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("ns", 1e-9)):
-        if abs(x) >= scale:
-            return f"{x / scale:.4g} {unit}"
-    return f"{x:g} s"
 
 
 def _group_bytes(h5, group: str) -> int:
@@ -57,7 +37,7 @@ def _attr_line(attrs: dict, keys: tuple[str, ...]) -> str:
         if k in attrs:
             v = attrs[k]
             if k.endswith("_s"):
-                v = _fmt_time(v)
+                v = format_duration_s(v)
             elif isinstance(v, float):
                 v = f"{v:.4g}"
             parts.append(f"{k}={v}")
@@ -79,7 +59,7 @@ def describe_recording(path) -> str:
         W, H, dur = rec.width, rec.height, rec.duration_s
         n_px = W * H
         lines = [f"recording {path}",
-                 f"  size        {_fmt_bytes(path.stat().st_size)}",
+                 f"  size        {format_bytes(path.stat().st_size)}",
                  f"  sequence    {rec.sequence} (scene {rec.scene}, trajectory {a.get('trajectory', '-')})",
                  f"  lux         {rec.lux:g}",
                  f"  grid        {W}×{H} px, {dur * 1e3:.4g} ms",
@@ -90,7 +70,7 @@ def describe_recording(path) -> str:
         if rec.has("gt"):
             t = rec.gt.t
             rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
-            lines.append(f"  gt          {len(t)} sharp frames at {rate:.4g} Hz, {_fmt_bytes(_group_bytes(rec.h5, 'gt'))}"
+            lines.append(f"  gt          {len(t)} sharp frames at {rate:.4g} Hz, {format_bytes(_group_bytes(rec.h5, 'gt'))}"
                          + (", depth" if "gt/depth" in rec.h5 else ""))
         lines.append("  sensors")
         if rec.has("spad"):
@@ -111,7 +91,7 @@ def _spad_lines(rec, n_px: int, dur: float) -> list[str]:
     sample = min(n_bins, _SPAD_SAMPLE_BINS)
     p1 = float(rec.spad.counts(0, sample).sum()) / (sample * n_px) if sample else float("nan")
     dcr = rec.spad.dcr_cps
-    return [f"    spad      {n_bins} binary frames ({1 / bin_s / 1e3:.4g} kHz), {_fmt_bytes(_group_bytes(rec.h5, 'spad'))}",
+    return [f"    spad      {n_bins} binary frames ({1 / bin_s / 1e3:.4g} kHz), {format_bytes(_group_bytes(rec.h5, 'spad'))}",
             f"              {_attr_line(sa, ('preset', 'bin_s', 'gate_s', 'pixel_pitch_m', 'fill_factor', 'qe', 'dead_time_s'))}",
             f"              mean P(1) {p1:.4f} (first {sample} frames), DCR median {np.median(dcr):.3g} cps",
             f"              bandwidth {1 / bin_s / 1e3:.4g} kHz/pixel = {1 / bin_s:.4g} bit/pixel/s "
@@ -125,7 +105,7 @@ def _frame_lines(rec, dur: float) -> list[str]:
     rate = float(fa.get("frame_rate_hz", (k - 1) / (t0[-1] - t0[0]) if k > 1 and t0[-1] > t0[0] else 0.0))
     bits = int(fa.get("bit_depth", 16))
     mean_dn = float(rec.frames.dn(0).mean()) if k else float("nan")
-    return [f"    frames    {k} frames at {rate:.4g} fps, {_fmt_bytes(_group_bytes(rec.h5, 'frames'))}",
+    return [f"    frames    {k} frames at {rate:.4g} fps, {format_bytes(_group_bytes(rec.h5, 'frames'))}",
             f"              {_attr_line(fa, ('preset', 'exposure_s', 'gain_dn_per_e', 'read_noise_e', 'full_well_e', 'bit_depth', 'qe', 'pixel_pitch_m'))}",
             f"              first frame mean {mean_dn:.1f} DN",
             f"              bandwidth {rate / 1e3:.4g} kHz/pixel = {rate * bits:.4g} bit/pixel/s"]
@@ -148,7 +128,7 @@ def _event_lines(rec, n_px: int, dur: float) -> list[str]:
         p = rec.h5["events/p"][: min(n, 1 << 22)]
         on = f", ON {p.mean():.1%}"
     return [f"    events    {n} events ({n / dur if dur > 0 else float('nan'):.4g} ev/s, {rate_px:.4g} ev/pixel/s{on}), "
-            f"{_fmt_bytes(_group_bytes(rec.h5, 'events'))}",
+            f"{format_bytes(_group_bytes(rec.h5, 'events'))}",
             f"              {_attr_line(ea, ('preset', 'threshold_on', 'threshold_off', 'threshold_sigma', 'refractory_s', 'pixel_pitch_m'))}",
             *( [f"              labels: {labels}"] if labels else []),
             f"              bandwidth {rate_px / 1e3:.4g} kHz/pixel = {rate_px * 32:.4g} bit/pixel/s (32 bit/event)"]
@@ -174,16 +154,8 @@ def describe_dataset(path) -> str:
              f"  lux         {', '.join(f'{x:g}' for x in spec.get('lux', []))}",
              f"  sensors     {', '.join(spec.get('sensors', {})) or '-'}",
              f"  recordings  {len(recs)}: {by_status['complete']} complete, {by_status['pending']} pending, "
-             f"{by_status['failed']} failed; {_fmt_bytes(total)}"]
-    rows = [("sequence", "lux", "status", "size", "simulate", "path")]
-    for e in recs:
-        t = (e.get("timings") or {}).get("simulate_s")
-        rows.append((e["sequence"], f"{e['lux']:g}", e["status"], _fmt_bytes(e.get("size")),
-                     "-" if t is None else f"{t:.1f} s", e["path"]))
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    for r in rows:
-        lines.append("    " + "  ".join(c.ljust(w) if i in (0, 2, 5) else c.rjust(w)
-                                        for i, (c, w) in enumerate(zip(r, widths))).rstrip())
+             f"{by_status['failed']} failed; {format_bytes(total)}"]
+    lines += ["    " + line for line in recording_table(recs, "path", lambda e: e["path"])]
     for e in recs:
         if e["status"] == "failed" and e.get("error"):
             lines.append(f"  failed {e['path']}: {e['error']}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from simspad.cli.text import format_duration_s
 from simspad.dataset.spec_hashing import spec_hash
 from simspad.dataset.spec_validation import load_spec
 from simspad.io.bundled import REPO_ROOT
@@ -53,25 +54,16 @@ def _overrides_text(overrides: dict) -> str:
     return " (overrides: " + ", ".join(f"{k}={v!r}" for k, v in overrides.items()) + ")"
 
 
-def _fmt_time(x) -> str:
-    if x == "auto":
-        return "auto"
-    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("ns", 1e-9)):
-        if abs(x) >= scale:
-            return f"{x / scale:.4g} {unit}"
-    return f"{x:g} s"
-
-
 def _key_params(p) -> str:
     kind = getattr(p, "kind", "")
     pitch = f"pitch {p.pixel_pitch_m * 1e6:.4g} µm, fill {p.fill_factor:.3g}, QE {p.qe:.3g}"
     if kind == "spad":
-        return (f"{pitch}, bin {_fmt_time(p.bin_s)} ({1 / p.bin_s / 1e3:.4g} kHz), gate {_fmt_time(p.gate_s)}, "
-                f"DCR median {p.dcr_median_cps:g} cps, dead time {_fmt_time(p.dead_time_s)}")
+        return (f"{pitch}, bin {format_duration_s(p.bin_s)} ({1 / p.bin_s / 1e3:.4g} kHz), gate {format_duration_s(p.gate_s)}, "
+                f"DCR median {p.dcr_median_cps:g} cps, dead time {format_duration_s(p.dead_time_s)}")
     if kind == "frames":
-        return (f"{pitch}, {p.frame_rate_hz:g} fps, exposure {_fmt_time(p.exposure_s)}, K {p.gain_dn_per_e:g} DN/e⁻, "
+        return (f"{pitch}, {p.frame_rate_hz:g} fps, exposure {format_duration_s(p.exposure_s)}, K {p.gain_dn_per_e:g} DN/e⁻, "
                 f"read noise {p.read_noise_e:g} e⁻, full well {p.full_well_e:g} e⁻, {p.bit_depth} bit")
     if kind == "events":
         return (f"{pitch}, thresholds +{p.threshold_on:g}/−{p.threshold_off:g} (σ {p.threshold_sigma:g}), "
-                f"refractory {_fmt_time(p.refractory_s)}, latency {_fmt_time(p.latency_s)}")
+                f"refractory {format_duration_s(p.refractory_s)}, latency {format_duration_s(p.latency_s)}")
     return pitch

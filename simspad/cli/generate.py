@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from simspad.cli.text import format_bytes, recording_table
 from simspad.dataset.executors import ExecutorConfig
 from simspad.dataset.generate import GenerateResult, generate, raise_for_failures
 from simspad.dataset.spec import default_spec_path
@@ -11,29 +12,11 @@ from simspad.dataset.spec_validation import load_spec
 from simspad.io.manifest import manifest_path
 
 
-def _fmt_bytes(n: int | None) -> str:
-    if n is None:
-        return "-"
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if n < 1024 or unit == "TiB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n} B"
-
-
 def summary_table(res: GenerateResult) -> str:
     """The closing summary: one row per recording (status, size, time), totals and where the files are."""
     recs = res.manifest["recordings"]
     done, skipped = set(res.done), set(res.skipped)
-    rows = [("sequence", "lux", "status", "size", "simulate", "")]
-    for e in recs:
-        note = "new" if e["path"] in done else ("kept" if e["path"] in skipped else "")
-        t = e.get("timings", {}).get("simulate_s")
-        rows.append((e["sequence"], f"{e['lux']:g}", e["status"], _fmt_bytes(e.get("size")),
-                     "-" if t is None else f"{t:.1f} s", note))
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    lines = ["  ".join(c.ljust(w) if i in (0, 2, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
-             .rstrip() for r in rows]
+    lines = recording_table(recs, "", lambda e: "new" if e["path"] in done else "kept" if e["path"] in skipped else "")
     lines.insert(1, "-" * len(lines[0]))
     total = sum(e.get("size") or 0 for e in recs)
     n_complete = sum(e["status"] == "complete" for e in recs)
@@ -41,7 +24,7 @@ def summary_table(res: GenerateResult) -> str:
                    if r["path"] in set(res.renders_done))
     lines += ["",
               f"{n_complete} of {len(recs)} recordings complete ({len(res.done)} generated, {len(res.skipped)} "
-              f"already there), {_fmt_bytes(total)} in all; {len(res.renders_done)} render(s) took {render_s:.1f} s",
+              f"already there), {format_bytes(total)} in all; {len(res.renders_done)} render(s) took {render_s:.1f} s",
               f"wall time {res.wall_s:.1f} s on {res.executor}",
               f"dataset:  {res.out_dir}",
               f"manifest: {manifest_path(res.out_dir)}"]

@@ -194,9 +194,10 @@ def sensitive_area_m2(pixel_pitch_m: float, fill_factor: float) -> float:
 def detection_area_m2(pixel_pitch_m: float, fill_factor: float, qe: float) -> float:
     """Detection area of one pixel, ``q = pitch² · fill_factor · qe`` (m²).
 
-    The one home of this product: the simulators, the fusion methods and the analyses all call it, so the area a
-    method inverts is bit-for-bit the area the simulator used (it is also recorded as the SPAD's
-    ``detection_area_m2`` attribute). Evaluated left to right, ``(pitch² · fill_factor) · qe``.
+    The simulators and the analyses call it (the SPAD records it as its ``detection_area_m2`` attribute).
+    Evaluated as ``(pitch² · fill_factor) · qe``. The fusion methods multiply in their historic order,
+    ``(qe · fill_factor) · pitch²`` (:func:`simspad.methods.spad_response.attrs_detection_area_m2`), up to 1 ulp
+    apart; they keep it so that evaluation results stay bit-identical.
 
     Parameters
     ----------

@@ -1,0 +1,41 @@
+"""Text building blocks of the command summaries: byte sizes, durations and the per-recording table."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+
+def format_bytes(n) -> str:
+    """``n`` bytes in binary units (``"512 B"``, ``"1.5 MiB"``); ``"-"`` for None."""
+    if n is None:
+        return "-"
+    n = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024:
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} TiB"
+
+
+def format_duration_s(x) -> str:
+    """A duration in seconds with the unit that reads best (``"10 ms"``, ``"1.5 µs"``); text (``"auto"``) as is."""
+    if isinstance(x, str):
+        return x
+    x = float(x)
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("ns", 1e-9)):
+        if abs(x) >= scale:
+            return f"{x / scale:.4g} {unit}"
+    return f"{x:g} s"
+
+
+def recording_table(recordings: list[dict], last_column: str, last_value: Callable[[dict], str]) -> list[str]:
+    """One aligned line per manifest recording entry (sequence, lux, status, size, simulate time, last column),
+    after a header line; text columns left-aligned, numbers right-aligned, trailing blanks stripped."""
+    rows = [("sequence", "lux", "status", "size", "simulate", last_column)]
+    for e in recordings:
+        t = (e.get("timings") or {}).get("simulate_s")
+        rows.append((e["sequence"], f"{e['lux']:g}", e["status"], format_bytes(e.get("size")),
+                     "-" if t is None else f"{t:.1f} s", last_value(e)))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) if i in (0, 2, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+            .rstrip() for r in rows]
