@@ -54,7 +54,11 @@ def cli(debug: bool) -> None:
 @click.option("--seed", type=int, default=defaults.SEED, show_default=True, help="Render seed (frozen Monte Carlo noise).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, out_dir):
-    """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own)."""
+    """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
+
+    SCENE is a built-in scene (fan, office, piano, plant, siemens-star: `simspad scenes` lists them) or a folder
+    holding a Mitsuba 3 scene.
+    """
     from simspad.cli.render import describe_render, render_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
@@ -66,12 +70,14 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 @cli.command()
 @click.argument("render_dir", type=click.Path(path_type=Path))
 @click.option("--lux", type=float, required=True, help="Scene illuminance in lux (> 0).")
-@click.option("--sensors", default="spad,frames,events", show_default=True, help="Comma-separated sensor kinds.")
+@click.option("--sensors", default="spad,frames,events", show_default=True,
+              help="Comma-separated sensor kinds (spad, frames, events).")
 @click.option("--start", "start_s", type=float, default=None, help="Start time (s); default: first keyframe.")
 @click.option("--duration", "duration_s", type=float, default=None, help="Duration (s); default: to the last keyframe.")
 @click.option("--seed", type=int, default=defaults.SEED, show_default=True)
 @click.option("--set", "overrides", multiple=True, metavar="SENSOR.FIELD=VALUE",
-              help="Override a preset field, e.g. --set spad.gate_s=1e-6 (repeatable).")
+              help="Override a preset field, e.g. --set spad.gate_s=1e-6 (repeatable; presets: swissspad2, "
+                   "blackfly_s, prophesee_gen4 — `simspad info` on a recording lists every field).")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True, help="Recording (.h5).")
 def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out_path):
     """Simulate the sensors on a render directory at one lux level and write a recording."""
@@ -83,13 +89,17 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 
 
 @cli.command()
-@click.argument("spec", required=False, type=click.Path(path_type=Path))
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None, help="Output directory (default: the spec's).")
+@click.argument("spec", required=False)
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Output directory (default: the spec's `output`, e.g. output/mini).")
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True)
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler (dask executor).")
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
 def generate(spec, out_dir, executor, scheduler, workers):
-    """Generate a dataset from SPEC (default: the embedded datasets/mini.toml)."""
+    """Generate a dataset from SPEC: a spec file or a bundled spec's name (default: mini).
+
+    Bundled specs: mini (the default, minutes on a laptop), simspad (paper scale).
+    """
     from simspad.cli.generate import generate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
     generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers)
@@ -129,7 +139,8 @@ def score(submission, dataset_dir, out_dir):
 
 
 @cli.command()
-@click.option("--out", "out_path", type=click.Path(path_type=Path), default=Path("snr.png"), show_default=True)
+@click.option("--out", "out_path", type=click.Path(path_type=Path), default=Path("output/snr.png"), show_default=True,
+              help="Figure (PNG).")
 def snr(out_path):
     """Plot the analytic SNR versus photon flux of the three sensors."""
     from simspad.cli.snr import snr_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
@@ -138,9 +149,9 @@ def snr(out_path):
 
 
 @cli.command()
-@click.argument("path", type=click.Path(path_type=Path))
+@click.argument("path")
 def info(path):
-    """Summarise a spec (.toml), trajectory, recording (.h5) or dataset directory."""
+    """Summarise a spec (.toml or a bundled name: mini, simspad), trajectory, recording (.h5) or dataset directory."""
     from simspad.cli.info import describe  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
     click.echo(describe(path))
@@ -148,7 +159,7 @@ def info(path):
 
 @cli.command()
 @click.option("--contact-sheet", "contact_sheet", type=click.Path(path_type=Path), default=None,
-              help="Render every built-in scene into one tone-mapped PNG.")
+              help="Also render every built-in scene into this tone-mapped PNG (e.g. output/scenes.png).")
 def scenes(contact_sheet):
     """List the built-in scenes and their default trajectories."""
     from simspad.cli.scenes import scenes_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)

@@ -7,7 +7,7 @@ from pathlib import Path
 from simspad.cli.text import format_duration_s
 from simspad.dataset.spec_hashing import spec_hash
 from simspad.dataset.spec_validation import load_spec
-from simspad.io.bundled import REPO_ROOT
+from simspad.io.bundled import DATA_ROOT
 from simspad.scenes.library import resolve_scene
 
 
@@ -35,7 +35,7 @@ def describe_spec(path) -> str:
 def _short(path) -> str:
     """``path`` relative to the current directory or the repository when inside them."""
     p = Path(path)
-    for root in (Path.cwd(), REPO_ROOT):
+    for root in (Path.cwd(), DATA_ROOT):
         try:
             return str(p.relative_to(root))
         except ValueError:

@@ -7,7 +7,7 @@ from pathlib import Path
 from simspad.cli.text import format_bytes, recording_table
 from simspad.dataset.executors import ExecutorConfig
 from simspad.dataset.generate import GenerateResult, generate, raise_for_failures
-from simspad.dataset.spec import default_spec_path
+from simspad.dataset.spec import default_spec_path, find_spec
 from simspad.dataset.spec_validation import load_spec
 from simspad.io.manifest import manifest_path
 
@@ -33,8 +33,8 @@ def summary_table(res: GenerateResult) -> str:
 
 def generate_from_cli(spec_path=None, out_dir=None, executor: str = "local", scheduler: str | None = None,
                       workers: int | None = None) -> Path:
-    """``simspad generate``: load the spec (default ``datasets/mini.toml``), run, print the summary table."""
-    spec = load_spec(spec_path if spec_path is not None else default_spec_path())
+    """``simspad generate``: load the spec (a path or a bundled name; default ``mini``), run, print the summary."""
+    spec = load_spec(find_spec(spec_path) if spec_path is not None else default_spec_path())
     res = generate(spec, out_dir=out_dir, executor=ExecutorConfig(executor, scheduler, workers), progress=True,
                    check=False)
     print(summary_table(res), flush=True)

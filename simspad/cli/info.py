@@ -13,6 +13,7 @@ from pathlib import Path
 from simspad.cli.describe import describe_dataset, describe_recording
 from simspad.cli.describe_spec import describe_spec
 from simspad.cli.describe_trajectory import describe_trajectory
+from simspad.dataset.spec import find_spec
 from simspad.errors import SimSpadError
 
 _TRAJECTORY_SUFFIXES = (".json", ".csv", ".txt", ".tum")
@@ -21,7 +22,7 @@ _TRAJECTORY_TOML_KEYS = {"camera", "objects"}
 
 
 def describe(path) -> str:
-    """Summary text of a spec (``.toml``), trajectory (``.toml``/``.json``/``.csv``/``.txt``/``.tum``),
+    """Summary text of a spec (``.toml`` or a bundled spec's name), trajectory (``.toml``/``.json``/``.csv``/``.txt``/``.tum``),
     recording (``.h5``) or dataset directory (holding ``manifest.json``).
 
     Raises
@@ -29,7 +30,7 @@ def describe(path) -> str:
     SimSpadError
         Missing path or a kind of file ``info`` does not know; malformed files raise the loaders' errors.
     """
-    path = Path(path)
+    path = find_spec(path)  # `simspad info mini` describes the bundled spec of that name
     if not path.exists():
         raise SimSpadError("no such file or directory", path=path)
     if path.is_dir():

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from simspad.io.bundled import REPO_ROOT
+from simspad.io.bundled import DATA_ROOT
 from simspad.render.contact_sheet import write_contact_sheet
 from simspad.scenes.library import list_scenes
 
@@ -28,6 +28,6 @@ def scenes_from_cli(contact_sheet: Path | None = None) -> None:
 def _display_path(path: Path) -> str:
     """``path`` relative to the repository when it lies inside it (as bundled trajectories do)."""
     try:
-        return path.resolve().relative_to(REPO_ROOT).as_posix()
+        return path.resolve().relative_to(DATA_ROOT).as_posix()
     except ValueError:
         return str(path)

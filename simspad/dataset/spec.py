@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from simspad import defaults
-from simspad.io.bundled import DATASETS_DIR
+from simspad.io.bundled import DATASETS_DIR, builtin_spec_path
 from simspad.sensors.presets import params_to_attrs
 
 
@@ -141,5 +141,18 @@ class DatasetSpec:
 
 
 def default_spec_path() -> Path:
-    """The embedded default spec, ``datasets/mini.toml`` of the repository."""
+    """The embedded default spec, the bundled ``mini`` (``simspad/data/datasets/mini.toml``)."""
     return DATASETS_DIR / "mini.toml"
+
+
+def find_spec(name_or_path) -> Path:
+    """The spec file a command-line argument names: an existing file, else a bundled spec's name (``mini``).
+
+    A path that exists neither as a file nor as a bundled name is returned unchanged, so that reading it reports
+    the missing file by its path.
+    """
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    bundled = builtin_spec_path(str(name_or_path)) if path.name == str(name_or_path) and not path.suffix else None
+    return bundled if bundled is not None else path

@@ -16,7 +16,7 @@ from pathlib import Path
 from simspad import defaults
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.errors import SimSpadError, SpecError
-from simspad.io.bundled import REPO_ROOT, TRAJECTORIES_DIR
+from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods
 from simspad.scenes.library import resolve_scene
@@ -309,7 +309,7 @@ def _check_trajectory(trajectory: str | None, scene: str, start_s: float, durati
 def _find_trajectory(name: str, base: Path) -> Path | None:
     p = Path(name).expanduser()
     # The spec's folder first, then the repository's trajectories/ (and its root, for "trajectories/x.toml").
-    candidates = [p] if p.is_absolute() else [base / p, TRAJECTORIES_DIR / p, REPO_ROOT / p]
+    candidates = [p] if p.is_absolute() else [base / p, TRAJECTORIES_DIR / p, DATA_ROOT / p]
     for c in candidates:
         if c.is_file():
             return c.resolve()

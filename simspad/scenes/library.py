@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from simspad.errors import SimSpadError
-from simspad.io.bundled import REPO_ROOT, SCENES_DIR
+from simspad.io.bundled import DATA_ROOT, SCENES_DIR
 
 _ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 #: Camera id assumed for a user's XML whose first perspective sensor has no id; the renderer then takes the
@@ -200,7 +200,7 @@ def _builtin_info(name: str) -> SceneInfo:
 
 def _folder_info(folder: Path, *, builtin: bool) -> SceneInfo:
     toml_path = folder / "scene.toml"
-    meta = _meta_fields(_read_toml(toml_path), toml_path, REPO_ROOT if builtin else folder)
+    meta = _meta_fields(_read_toml(toml_path), toml_path, DATA_ROOT if builtin else folder)
     if (folder / "scene.py").is_file():
         source = folder / "scene.py"
     else:

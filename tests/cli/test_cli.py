@@ -54,3 +54,30 @@ def test_bad_input_has_no_traceback_unless_debug(tmp_path, simspad_cli):
 def test_usage_error_exits_nonzero(capsys):
     assert main(["info"]) == 2
     assert "Missing argument" in capsys.readouterr().err
+
+
+def test_help_names_the_real_choices_and_output_defaults(capsys):
+    """The help texts list the bundled specs, scenes and presets that exist, and where outputs go by default."""
+    from simspad.io.bundled import builtin_spec_names
+    from simspad.scenes.library import builtin_scene_names
+    from simspad.sensors.presets import PRESETS
+
+    def help_of(command):
+        assert main([command, "--help"]) == 0
+        return " ".join(capsys.readouterr().out.split())  # click wraps lines
+
+    generate = help_of("generate")
+    assert all(name in generate for name in builtin_spec_names()) and "output/mini" in generate
+    render = help_of("render")
+    assert all(name in render for name in builtin_scene_names())
+    simulate = help_of("simulate")
+    assert all(preset in simulate for presets in PRESETS.values() for preset in presets)
+    assert "output/snr.png" in help_of("snr")
+
+
+def test_info_and_generate_accept_a_bundled_spec_name(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # not the checkout: the name resolves through the package data
+    assert main(["info", "mini"]) == 0
+    assert "mini" in capsys.readouterr().out
+    assert main(["info", "no-such-spec"]) == 2
+    assert "no-such-spec: no such file or directory" in capsys.readouterr().err

@@ -13,6 +13,7 @@ from simspad.dataset.spec import DatasetSpec, EvaluationSpec, default_spec_path
 from simspad.dataset.spec_hashing import sequence_hash, spec_hash
 from simspad.dataset.spec_validation import load_spec
 from simspad.errors import SpecError
+from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams
 
 SCENE_XML = """<scene version="3.0.0">
@@ -52,7 +53,7 @@ spp = 4
 [[sequences]]
 name = "second"
 scene = "myscene"
-trajectory = "example_pan.csv"     # not beside the spec: found in the repository's trajectories/
+trajectory = "example_pan.csv"     # not beside the spec: found in the bundled trajectories/
 duration_s = 0.5
 start_s = 0.1
 resolution = [16, 12]
@@ -91,7 +92,7 @@ def test_good_spec_loads_into_typed_objects(workdir):
     assert Path(first.trajectory) == workdir / "specs" / "dolly.csv"
     assert first.resolution == (32, 24) and first.spp == 4 and first.duration_s == 0.02 and first.start_s == 0.0
     assert first.max_flow_px == 0.5 and first.min_rate_hz == 1000.0
-    assert Path(second.trajectory) == Path(__file__).resolve().parents[2] / "trajectories" / "example_pan.csv"
+    assert Path(second.trajectory) == TRAJECTORIES_DIR / "example_pan.csv"
     assert second.max_flow_px == 0.25 and second.start_s == 0.1
     assert set(spec.sensors) == {"spad", "frames"}
     spad = spec.sensors["spad"]

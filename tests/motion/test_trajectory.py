@@ -10,12 +10,12 @@ from scipy.spatial.transform import Rotation
 
 from simspad.cli import main
 from simspad.errors import InputError
+from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory, save_trajectory
 from simspad.motion.generators import Tremor, handheld_shake, linear_pan, object_rotation, orbit, static_pose
 from simspad.motion.summary import motion_summary
 from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 
-REPO = Path(__file__).resolve().parents[2]
 
 
 def _random_trajectory(seed: int, n: int = 7, t0: float = 0.0) -> Trajectory:
@@ -142,7 +142,7 @@ def test_tum_import_of_realistic_file(tmp_path):
 
 
 def test_bundled_example_trajectories_load():
-    for path in sorted((REPO / "trajectories").glob("example_*")):
+    for path in sorted(TRAJECTORIES_DIR.glob("example_*")):
         ts = load_trajectory(path)
         assert ts.camera is not None and ts.t_end > ts.t_start, path
 
