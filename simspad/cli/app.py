@@ -7,6 +7,7 @@ non-zero, with no traceback unless ``--debug`` is given.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -88,11 +89,12 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True)
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler (dask executor).")
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
-def generate(spec, out_dir, executor, scheduler, workers):
+@click.option("--prune", is_flag=True, help="Delete recordings and renders that the changed spec no longer lists.")
+def generate(spec, out_dir, executor, scheduler, workers, prune):
     """Generate a dataset from SPEC (default: the embedded datasets/mini.toml)."""
     from simspad.cli.generate import generate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers)
+    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers, prune=prune)
 
 
 @cli.command()
@@ -158,6 +160,18 @@ def scenes(contact_sheet):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit."""
+    code = _main(argv)
+    writer = sys.modules.get("simspad.io.recording.writer")
+    if writer is not None and writer.hdf5_close_failed():
+        # A close failed on a full disk: HDF5 would crash retrying it at exit (SIGSEGV); the temporary file is
+        # already deleted and the message printed, so end here.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         cli.main(args=argv, standalone_mode=False)
     except SimSpadError as exc:
