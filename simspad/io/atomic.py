@@ -70,6 +70,15 @@ def check_output_path(path: str | Path, *, kind: str | None = None, field: str |
     return path
 
 
+def check_output_file(path: str | Path, *, field: str | None = "--out") -> Path:
+    """Up-front check of an output file, before any slow work: not a special file or link, and its folder can
+    be created and written."""
+    path = Path(path)
+    check_output_path(path, kind="file", field=field)
+    ensure_writable_dir(path.parent, what=f"{field or 'output'} folder")
+    return path
+
+
 def is_disk_full(exc: BaseException) -> bool:
     """True if ``exc`` says the disk (or quota, or file-size limit) is full; h5py reports it only in the text."""
     if isinstance(exc, OSError) and exc.errno in _DISK_FULL_ERRNOS:

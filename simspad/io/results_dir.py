@@ -26,6 +26,7 @@ import numpy as np
 from PIL import Image
 
 from simspad.errors import SimSpadError
+from simspad.io.atomic import check_output_path
 
 RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "psnr_db", "ssim",
                   "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
@@ -127,7 +128,8 @@ def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_r
 
 
 def check_output_dir(out_dir: Path) -> None:
-    """Refuse to replace a non-empty directory that is not a SimSPAD results directory."""
+    """Refuse to replace a non-empty directory that is not a SimSPAD results directory (or a link, device...)."""
+    check_output_path(out_dir, kind="dir")
     if out_dir.exists():
         if not out_dir.is_dir():
             raise SimSpadError("exists and is not a directory", path=out_dir, field="--out")

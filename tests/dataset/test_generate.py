@@ -172,7 +172,7 @@ def test_spec_change_redoes_only_what_changed(tiny):
     # Sequence b renders with more samples; the 100 lx level becomes 1000 lx.
     spec2 = load_spec(_write_spec(root / "changed.toml", lux=(1, 1000), spp_b=4))
     # Without --prune nothing is deleted: the run is refused, naming what it would remove.
-    with pytest.raises(SimSpadError, match=r"no longer lists 2 item\(s\).*a_100lx\.h5.*--prune"):
+    with pytest.raises(SimSpadError, match=r"no longer lists 3 item\(s\).*a_100lx\.h5.*--prune"):
         generate(spec2, changed, ExecutorConfig("dask", workers=2), progress=False)
     assert (changed / "recordings/a/a_100lx.h5").exists()
     logged = []
