@@ -34,10 +34,14 @@ def _parse_resolution(ctx, param, value):
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="simspad")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
-def cli(debug: bool) -> None:
+@click.option("--allow-python-scenes", "allow_python_scenes", is_flag=True,
+              help="Run users' scene folders that hold scene.py (Python code); off by default.")
+def cli(debug: bool, allow_python_scenes: bool) -> None:
     """SimSPAD: physically rendered SPAD, frame and event datasets for low-light, high-speed imaging."""
     global _DEBUG
     _DEBUG = debug
+    if allow_python_scenes:
+        os.environ["SIMSPAD_ALLOW_PYTHON_SCENES"] = "1"  # inherited by render and simulation workers
 
 
 @cli.command()
