@@ -23,6 +23,7 @@ import numpy as np
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
 from simspad.io.exr import read_exr, read_exr_info, write_exr
+from simspad.io.safe_paths import confined_path
 
 TIMELINE_FORMAT = "simspad-timeline"
 TIMELINE_VERSION = 1
@@ -110,7 +111,7 @@ def read_render_dir(render_dir: str | Path) -> RenderDirIndex:
         name = kf.get("file")
         if not isinstance(name, str) or not name:
             raise InputError("expected a frame file name", path=meta_path, field=f"{field}.file")
-        file = render_dir / name
+        file = confined_path(render_dir, name, source=meta_path, field=f"{field}.file")
         if not file.is_file():
             raise InputError(f"frame file {name!r} is missing", path=meta_path, field=f"{field}.file")
         info = read_exr_info(file)
