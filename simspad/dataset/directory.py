@@ -22,6 +22,8 @@ from pathlib import Path
 
 from simspad.errors import SimSpadError
 from simspad.io.provenance import utc_now
+from simspad.io.render_dir import read_render_dir
+from simspad.render.keyframe_files import frame_is_intact
 
 LOCK_NAME = ".simspad.lock"
 RENDERS_DIR = "renders"
@@ -128,3 +130,23 @@ def check_prune(out_dir: Path, obsolete: list[str], prune: bool, log) -> None:
         raise SimSpadError(f"the spec no longer lists {len(present)} item(s) of this dataset: {shown}; re-run with "
                            "--prune to delete them, or choose another --out", path=out_dir, field="--out")
     log(f"--prune: removing {len(present)} item(s) no longer in the spec: {shown}")
+
+
+def check_render_cache(render_dir: Path, log) -> bool:
+    """Verify a finished render of the dataset (``timeline.json`` and every keyframe decodes completely); if any
+    part is damaged (a truncated EXR, a corrupt timeline), log which and remove ``timeline.json`` so the render
+    runs again instead of every later simulation failing on it. Returns True when the render is intact."""
+    meta = render_dir / "timeline.json"
+    if not meta.is_file():
+        return False
+    try:
+        index = read_render_dir(render_dir)
+        bad = [f for f in index.files if not frame_is_intact(f)]
+        problem = f"damaged keyframe {bad[0].name} ({len(bad)} of {len(index.files)})" if bad else None
+    except SimSpadError as exc:
+        problem = exc.message
+    if problem is None:
+        return True
+    log(f"render {render_dir.name}: {problem}; rendering it again")
+    meta.unlink(missing_ok=True)
+    return False

@@ -31,7 +31,14 @@ from typing import Any, Callable
 
 from tqdm import tqdm
 
-from simspad.dataset.directory import RENDERS_DIR, DatasetLock, check_dataset_owner, check_prune, remove_temporaries
+from simspad.dataset.directory import (
+    RENDERS_DIR,
+    DatasetLock,
+    check_dataset_owner,
+    check_prune,
+    check_render_cache,
+    remove_temporaries,
+)
 from simspad.dataset.executors import ExecutorConfig, make_executor
 from simspad.dataset.manifest_state import (
     ManifestState,
@@ -160,6 +167,8 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
             entry.pop("error", None)
             todo.append(task)
     needed = {t.render_rel_dir for t in todo}
+    for rel in sorted(needed):
+        check_render_cache(out_dir / rel, log)  # a damaged cached render is rendered again, not re-used forever
     renders = [r for r in plan.renders if r.rel_dir in needed and not (out_dir / r.rel_dir / "timeline.json").is_file()]
     for r in plan.renders:
         if r.rel_dir in needed and r not in renders:
