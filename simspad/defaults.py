@@ -41,3 +41,6 @@ MAX_SAMPLES_PER_RECORDING = 100_000_000
 MIN_SPAD_BIN_S = 1e-9
 #: Highest frame, evaluation or ground-truth rate in Hz (1 MHz: the fastest high-speed cameras).
 MAX_RATE_HZ = 1e6
+#: Largest |time| (s) and |position| (m) of a trajectory keyframe: beyond, a unit slip or garbage (±1e308).
+MAX_TRAJECTORY_TIME_S = 1e10  # TUM files carry Unix times (~1.7e9 s)
+MAX_TRAJECTORY_POSITION_M = 1e6

@@ -7,6 +7,7 @@ non-zero, with no traceback unless ``--debug`` is given.
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from pathlib import Path
@@ -42,6 +43,9 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
     _DEBUG = debug
     if allow_python_scenes:
         os.environ["SIMSPAD_ALLOW_PYTHON_SCENES"] = "1"  # inherited by render and simulation workers
+    from simspad.io.provenance import source_date_epoch  # deferred: `simspad --help` stays 0.25 s
+
+    source_date_epoch()  # a malformed $SOURCE_DATE_EPOCH is one line now, not a crash inside a later import
 
 
 @cli.command()
@@ -175,6 +179,19 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
+#: errno values of an OSError that come from the paths or the disk the user chose, not from a bug.
+_USER_ERRNOS = {errno.ENAMETOOLONG, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT,
+                errno.EFBIG, errno.ENOTDIR, errno.EISDIR, errno.ELOOP, errno.ENOENT}
+
+
+def _internal_error(exc: BaseException) -> int:
+    if _DEBUG:
+        raise exc
+    click.echo(f"simspad: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+               err=True)
+    return 1
+
+
 def _main(argv: list[str] | None) -> int:
     try:
         cli.main(args=argv, standalone_mode=False)
@@ -192,6 +209,15 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt:
         click.echo("simspad: interrupted", err=True)
         return 130
+    except OSError as exc:
+        if _DEBUG or exc.errno not in _USER_ERRNOS:
+            return _internal_error(exc)
+        # The system refused a path the user named (too long, read-only, no permission, full disk): their input.
+        click.echo(f"simspad: error: {exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror}", err=True)
+        return 2
+    except RecursionError:
+        click.echo("simspad: error: input nested too deeply to read (a malformed or hostile file?)", err=True)
+        return 2
     except Exception as exc:  # a bug, not bad input: still one line unless --debug
         if _DEBUG:
             raise
