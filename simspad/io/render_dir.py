@@ -96,6 +96,9 @@ def read_render_dir(render_dir: str | Path) -> RenderDirIndex:
     keyframes = meta.get("keyframes")
     if not isinstance(keyframes, list) or not keyframes:
         raise InputError("expected a non-empty list of {t, file}", path=meta_path, field="keyframes")
+    if len(keyframes) < 2:
+        raise InputError("one keyframe: radiance is interpolated between keyframes, so a render directory needs at "
+                         "least two (render a duration > 0)", path=meta_path, field="keyframes")
 
     times, files, poses = [], [], []
     for i, kf in enumerate(keyframes):

@@ -87,3 +87,12 @@ def test_evaluate_and_info_verify_the_manifest_sha256(evaluation_dataset, tmp_pa
         (ds / "manifest.json").write_text(json.dumps({**m, **patch}))
         with pytest.raises(InputError, match=rf"manifest\.json: {re.escape(field)}"):
             list_recordings(ds)
+
+
+def test_one_keyframe_render_dir_says_two_are_needed(tmp_path):
+    meta = write_render_dir(tmp_path / "r", np.array([0.0, 0.01]), np.ones((2, 4, 6, 3), np.float32))
+    doc = json.loads(meta.read_text())
+    doc["keyframes"] = doc["keyframes"][:1]
+    meta.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="needs at least two"):
+        read_render_dir(tmp_path / "r")
