@@ -53,3 +53,14 @@ def test_bad_input_is_one_line_exit_2(files, case, capsys):
 def test_malformed_source_date_epoch_is_one_line(tmp_path, simspad_cli):
     proc = simspad_cli.run("info", "mini", env={"SOURCE_DATE_EPOCH": "abc"})
     assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "SOURCE_DATE_EPOCH" in proc.stderr
+
+
+def test_keyframe_times_in_microseconds_are_refused_before_writing(tmp_path, capsys):
+    # 0 … 33 000 "s" (µs written as seconds): 3.2e9 SPAD bins; before, 4.2 GB were written in 60 s.
+    render = write_render_dir(tmp_path / "r", np.array([0.0, 33_000.0]), np.ones((2, 4, 6, 3), np.float32)).parent
+    assert main(["simulate", str(render), "--lux", "10", "--out", str(tmp_path / "o" / "a.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "spad rows, above the limit of 1e+08 (keyframe times in µs written as seconds?" in err
+    assert not (tmp_path / "o").exists() or not list((tmp_path / "o").iterdir())
+    assert main(["simulate", str(render), "--lux", "1e30", "--out", str(tmp_path / "o" / "a.h5")]) == 2
+    assert "outside 1e-06–1e+06 lx" in capsys.readouterr().err
