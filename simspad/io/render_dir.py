@@ -146,7 +146,8 @@ def read_keyframe(file: Path, width: int, height: int) -> dict[str, np.ndarray]:
     Raises
     ------
     InputError
-        The frame's size differs from ``width`` x ``height``, or its radiance is NaN, infinite or negative.
+        The frame's size differs from ``width`` x ``height``, its radiance is NaN, infinite or negative, or its
+        depth is NaN or negative.
     """
     data = read_exr(file)
     radiance = data.get("rgb", data.get("y"))
@@ -154,6 +155,11 @@ def read_keyframe(file: Path, width: int, height: int) -> dict[str, np.ndarray]:
         raise InputError(f"size {radiance.shape[1]}x{radiance.shape[0]} differs from timeline.json's "
                          f"{width}x{height}", path=file, field="dataWindow")
     _check_radiance(radiance, file, "R,G,B" if "rgb" in data else "Y")
+    depth = data.get("z")
+    if depth is not None and (np.isnan(depth).any() or (depth < 0).any()):
+        row, col = np.argwhere(np.isnan(depth) | (depth < 0))[0][:2]
+        raise InputError(f"depth {depth[row, col]} at pixel (row {row}, col {col}) (expected ≥ 0 metres; 0 where "
+                         "no surface)", path=file, field="Z")
     return data
 
 

@@ -96,3 +96,16 @@ def test_one_keyframe_render_dir_says_two_are_needed(tmp_path):
     meta.write_text(json.dumps(doc))
     with pytest.raises(InputError, match="needs at least two"):
         read_render_dir(tmp_path / "r")
+
+
+def test_nan_or_negative_depth_is_refused(tmp_path):
+    from simspad.io.render_dir import read_keyframe
+
+    for value in (np.nan, -1.0):
+        depth = np.ones((2, 4, 6), np.float32)
+        depth[1, 2, 3] = value
+        write_render_dir(tmp_path / str(value), np.array([0.0, 0.01]), np.ones((2, 4, 6, 3), np.float32), depth=depth)
+        index = read_render_dir(tmp_path / str(value))
+        read_keyframe(index.files[0], 6, 4)
+        with pytest.raises(InputError, match=r"depth .* at pixel \(row 2, col 3\)"):
+            read_keyframe(index.files[1], 6, 4)
