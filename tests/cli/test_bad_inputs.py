@@ -64,3 +64,33 @@ def test_keyframe_times_in_microseconds_are_refused_before_writing(tmp_path, cap
     assert not (tmp_path / "o").exists() or not list((tmp_path / "o").iterdir())
     assert main(["simulate", str(render), "--lux", "1e30", "--out", str(tmp_path / "o" / "a.h5")]) == 2
     assert "outside 1e-06–1e+06 lx" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("damage, fragment", [
+    ("width_text", "/.width: expected a positive integer, got 'abc'"),
+    ("lux_array", "/.lux: expected a finite number"),
+    ("group_for_dataset", "/gt/flux: expected a dataset, found a group"),
+    ("nan_gt", "/gt/flux: ground-truth flux nan at pixel (row 0, col 0) of frame 0"),
+])
+def test_damaged_recording_is_one_line(tmp_path, capsys, damage, fragment):
+    import h5py
+
+    from tests.helpers.evaluation_data import write_recording
+
+    path = tmp_path / "rec.h5"
+    write_recording(path, sequence="s", scene="s", lux=10.0, level=3e15, seed=1)
+    with h5py.File(path, "r+") as f:
+        if damage == "width_text":
+            f.attrs["width"] = "abc"
+        elif damage == "lux_array":
+            f.attrs["lux"] = np.array([1.0, 2.0])
+        elif damage == "group_for_dataset":
+            del f["gt/flux"]
+            f.create_group("gt/flux")
+        else:
+            flux = f["gt/flux"][()]
+            flux[0, 0, 0] = np.nan
+            f["gt/flux"][...] = flux
+    assert main(["evaluate", str(path), "--methods", "ni", "--out", str(tmp_path / "res")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and fragment in err, err
