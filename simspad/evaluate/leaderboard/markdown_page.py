@@ -12,8 +12,8 @@ from simspad.evaluate.leaderboard.tables import MTF_NOTE, lux_table, mtf_table, 
 
 
 #: Markdown syntax characters escaped with a backslash in user text, so a method name cannot become a link, an
-#: image, emphasis or code: ``[x](http://evil)`` shows as written.
-_MD_SPECIAL = "\\`*_{}[]()#+!|~"
+#: image (both need ``[``), emphasis or code: ``[x](http://evil)`` shows as written; ``(S)`` stays readable.
+_MD_SPECIAL = "\\`*_[]|"
 
 
 def md_escape(text: str) -> str:
