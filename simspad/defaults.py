@@ -16,3 +16,31 @@ MIN_KEYFRAME_RATE_HZ = 1000.0
 GT_RATE_HZ = 1000.0
 #: Seed of renders and sensor streams when none is given.
 SEED = 0
+
+# Resource bounds: values past these are typos or unit slips (µs written as s), refused before any work with the
+# figure; SIMSPAD_IGNORE_LIMITS=1 lifts the size bounds for a machine that can take them.
+#: Largest render (width × height) in pixels: 4096 × 4096; a 16000² film alone needs ~15 GB.
+MAX_RENDER_PIXELS = 4096 * 4096
+#: Bytes of memory per rendered pixel (Mitsuba film RGBA + depth AOV in float32, developed copies, EXR buffers).
+RENDER_BYTES_PER_PIXEL = 64
+#: Largest Monte Carlo samples per pixel.
+MAX_SPP = 65536
+#: Smallest max_flow_px: below 0.01 px the interpolation error is far under any sensor's noise.
+MIN_MAX_FLOW_PX = 0.01
+#: Most keyframes one render may schedule (each is one EXR of the render size).
+MAX_KEYFRAMES = 200_000
+#: Most samples a motion generator may tabulate (duration × its sampling rate).
+MAX_GENERATOR_SAMPLES = 2_000_000
+#: Longest sequence in seconds (SPAD bins of 10 µs: 1e8 bins in 1000 s).
+MAX_DURATION_S = 1000.0
+#: Lux levels accepted: 1e-6 lx (far below a moonless overcast night) to 1e6 lx (about 10× direct sunlight).
+LUX_RANGE = (1e-6, 1e6)
+#: Most frames, SPAD bins or ground-truth instants one recording may hold.
+MAX_SAMPLES_PER_RECORDING = 100_000_000
+#: Shortest SPAD bin in seconds (1 ns: shorter than any SPAD's dead time).
+MIN_SPAD_BIN_S = 1e-9
+#: Highest frame, evaluation or ground-truth rate in Hz (1 MHz: the fastest high-speed cameras).
+MAX_RATE_HZ = 1e6
+#: Largest |time| (s) and |position| (m) of a trajectory keyframe: beyond, a unit slip or garbage (±1e308).
+MAX_TRAJECTORY_TIME_S = 1e10  # TUM files carry Unix times (~1.7e9 s)
+MAX_TRAJECTORY_POSITION_M = 1e6

@@ -7,6 +7,8 @@ non-zero, with no traceback unless ``--debug`` is given.
 
 from __future__ import annotations
 
+import errno
+import os
 import sys
 from pathlib import Path
 
@@ -33,10 +35,17 @@ def _parse_resolution(ctx, param, value):
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="simspad")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
-def cli(debug: bool) -> None:
+@click.option("--allow-python-scenes", "allow_python_scenes", is_flag=True,
+              help="Run users' scene folders that hold scene.py (Python code); off by default.")
+def cli(debug: bool, allow_python_scenes: bool) -> None:
     """SimSPAD: physically rendered SPAD, frame and event datasets for low-light, high-speed imaging."""
     global _DEBUG
     _DEBUG = debug
+    if allow_python_scenes:
+        os.environ["SIMSPAD_ALLOW_PYTHON_SCENES"] = "1"  # inherited by render and simulation workers
+    from simspad.io.provenance import source_date_epoch  # deferred: `simspad --help` stays 0.25 s
+
+    source_date_epoch()  # a malformed $SOURCE_DATE_EPOCH is one line now, not a crash inside a later import
 
 
 @cli.command()
@@ -95,14 +104,15 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True)
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler (dask executor).")
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
-def generate(spec, out_dir, executor, scheduler, workers):
+@click.option("--prune", is_flag=True, help="Delete recordings and renders that the changed spec no longer lists.")
+def generate(spec, out_dir, executor, scheduler, workers, prune):
     """Generate a dataset from SPEC: a spec file or a bundled spec's name (default: mini).
 
     Bundled specs: mini (the default, minutes on a laptop), simspad (paper scale).
     """
     from simspad.cli.generate import generate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers)
+    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers, prune=prune)
 
 
 @cli.command()
@@ -169,6 +179,31 @@ def scenes(contact_sheet):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit."""
+    code = _main(argv)
+    writer = sys.modules.get("simspad.io.recording.writer")
+    if writer is not None and writer.hdf5_close_failed():
+        # A close failed on a full disk: HDF5 would crash retrying it at exit (SIGSEGV); the temporary file is
+        # already deleted and the message printed, so end here.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+#: errno values of an OSError that come from the paths or the disk the user chose, not from a bug.
+_USER_ERRNOS = {errno.ENAMETOOLONG, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT,
+                errno.EFBIG, errno.ENOTDIR, errno.EISDIR, errno.ELOOP, errno.ENOENT}
+
+
+def _internal_error(exc: BaseException) -> int:
+    if _DEBUG:
+        raise exc
+    click.echo(f"simspad: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+               err=True)
+    return 1
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         cli.main(args=argv, standalone_mode=False)
     except SimSpadError as exc:
@@ -185,6 +220,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         click.echo("simspad: interrupted", err=True)
         return 130
+    except OSError as exc:
+        if _DEBUG or exc.errno not in _USER_ERRNOS:
+            return _internal_error(exc)
+        # The system refused a path the user named (too long, read-only, no permission, full disk): their input.
+        click.echo(f"simspad: error: {exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror}", err=True)
+        return 2
+    except RecursionError:
+        click.echo("simspad: error: input nested too deeply to read (a malformed or hostile file?)", err=True)
+        return 2
     except Exception as exc:  # a bug, not bad input: still one line unless --debug
         if _DEBUG:
             raise

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.cli.text import format_bytes, format_duration_s, recording_table
-from simspad.io.manifest import read_manifest
+from simspad.io.manifest import read_manifest, recording_mismatch
 from simspad.io.recording import open_recording
 
 _SPAD_SAMPLE_BINS = 1024
@@ -134,6 +134,24 @@ def _event_lines(rec, n_px: int, dur: float) -> list[str]:
             f"              bandwidth {rate_px / 1e3:.4g} kHz/pixel = {rate_px * 32:.4g} bit/pixel/s (32 bit/event)"]
 
 
+#: ``simspad info DATASET`` hashes the complete recordings up to this many bytes in all (about 10 s per 10 GB).
+_VERIFY_MAX_BYTES = 20 * 2**30
+
+
+def _verification_lines(path: Path, recs: list[dict]) -> list[str]:
+    """Whether the complete recordings' bytes still match the manifest's sha256 (or that the check was skipped)."""
+    complete = [e for e in recs if e["status"] == "complete"]
+    total = sum(e.get("size") or 0 for e in complete)
+    if not complete:
+        return []
+    if total > _VERIFY_MAX_BYTES:
+        return [f"  verified    no: {format_bytes(total)} to hash (simspad evaluate verifies each recording it reads)"]
+    bad = [(e["path"], why) for e in complete if (why := recording_mismatch(path, e))]
+    lines = [f"  verified    {len(complete) - len(bad)} of {len(complete)} complete recordings match their sha256"]
+    lines += [f"  CORRUPT     {rel}: {why}" for rel, why in bad]
+    return lines
+
+
 def describe_dataset(path) -> str:
     """Summary of a dataset directory: spec, and every recording's status, size and timings.
 
@@ -156,6 +174,7 @@ def describe_dataset(path) -> str:
              f"  recordings  {len(recs)}: {by_status['complete']} complete, {by_status['pending']} pending, "
              f"{by_status['failed']} failed; {format_bytes(total)}"]
     lines += ["    " + line for line in recording_table(recs, "path", lambda e: e["path"])]
+    lines += _verification_lines(path, recs)
     for e in recs:
         if e["status"] == "failed" and e.get("error"):
             lines.append(f"  failed {e['path']}: {e['error']}")

@@ -32,11 +32,11 @@ def summary_table(res: GenerateResult) -> str:
 
 
 def generate_from_cli(spec_path=None, out_dir=None, executor: str = "local", scheduler: str | None = None,
-                      workers: int | None = None) -> Path:
+                      workers: int | None = None, prune: bool = False) -> Path:
     """``simspad generate``: load the spec (a path or a bundled name; default ``mini``), run, print the summary."""
     spec = load_spec(find_spec(spec_path) if spec_path is not None else default_spec_path())
     res = generate(spec, out_dir=out_dir, executor=ExecutorConfig(executor, scheduler, workers), progress=True,
-                   check=False)
+                   check=False, prune=prune)
     print(summary_table(res), flush=True)
     raise_for_failures(res)
     return res.out_dir

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from simspad.errors import SimSpadError
+from simspad.io.atomic import check_output_file
 from simspad.sensors.presets import SENSOR_KINDS, sensor_params
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
@@ -83,5 +84,8 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
             params[kind] = sensor_params(kind, None, per_kind[kind])
         except ValueError as exc:
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
+    if seed is None or seed < 0 or seed >= 2**64:
+        raise SimSpadError(f"must be an integer in [0, 2**64), got {seed!r}", field="--seed")
+    check_output_file(out_path)
     settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed)
     return simulate_recording(render_dir, out_path, settings, progress=sys.stderr.isatty())

@@ -7,10 +7,11 @@ from pathlib import Path
 import click
 
 from simspad.analysis.snr import plot_snr
+from simspad.io.atomic import check_output_file
 
 
 def snr_from_cli(out_path) -> Path:
     """The ``simspad snr`` command."""
-    path = plot_snr(Path(out_path))
+    path = plot_snr(check_output_file(Path(out_path)))
     click.echo(f"wrote {path}")
     return path

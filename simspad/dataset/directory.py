@@ -22,6 +22,8 @@ from pathlib import Path
 
 from simspad.errors import SimSpadError
 from simspad.io.provenance import utc_now
+from simspad.io.render_dir import read_render_dir
+from simspad.render.keyframe_files import frame_is_intact
 
 LOCK_NAME = ".simspad.lock"
 RENDERS_DIR = "renders"
@@ -89,3 +91,62 @@ def remove_temporaries(out_dir: Path) -> list[Path]:
                     p.unlink(missing_ok=True)
                 removed.append(p)
     return removed
+
+
+#: What a dataset folder may hold before its first manifest (a run killed early, renders copied in by hand).
+_DATASET_ENTRIES = {LOCK_NAME, RENDERS_DIR, RECORDINGS_DIR, "manifest.json"}
+
+
+def check_dataset_owner(out_dir: Path, previous: dict | None, spec_name: str) -> None:
+    """Refuse to write the dataset ``spec_name`` into a folder that belongs to another dataset or holds other files.
+
+    A dataset folder belongs to the spec ``name`` recorded in its manifest: a mistyped ``--out`` naming another
+    dataset must not overwrite (or prune) that dataset's recordings. A folder without a manifest may hold only
+    what a run writes (``renders/``, ``recordings/``, the lock, temporaries), so ``--out ~`` is refused too.
+    """
+    if previous is not None:
+        owner = previous.get("name")
+        if owner != spec_name:
+            raise SimSpadError(f"this folder holds the dataset {owner!r}, not {spec_name!r}; refusing to overwrite it "
+                               "(choose another --out, or set name in the spec to match)", path=out_dir,
+                               field="--out")
+        return
+    foreign = sorted(p.name for p in out_dir.iterdir() if p.name not in _DATASET_ENTRIES
+                     and not _TMP_NAME.match(p.name))
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise SimSpadError(f"not empty and not a SimSPAD dataset (holds {shown}); choose an empty or new folder "
+                           "for --out", path=out_dir, field="--out")
+
+
+def check_prune(out_dir: Path, obsolete: list[str], prune: bool, log) -> None:
+    """Recordings and renders of the previous manifest that the spec no longer lists are deleted only when
+    ``prune`` is given; otherwise refuse, naming them, so a changed spec never silently deletes data."""
+    present = [rel for rel in obsolete if (out_dir / rel).exists()]
+    if not present:
+        return
+    shown = ", ".join(present[:6]) + (f" and {len(present) - 6} more" if len(present) > 6 else "")
+    if not prune:
+        raise SimSpadError(f"the spec no longer lists {len(present)} item(s) of this dataset: {shown}; re-run with "
+                           "--prune to delete them, or choose another --out", path=out_dir, field="--out")
+    log(f"--prune: removing {len(present)} item(s) no longer in the spec: {shown}")
+
+
+def check_render_cache(render_dir: Path, log) -> bool:
+    """Verify a finished render of the dataset (``timeline.json`` and every keyframe decodes completely); if any
+    part is damaged (a truncated EXR, a corrupt timeline), log which and remove ``timeline.json`` so the render
+    runs again instead of every later simulation failing on it. Returns True when the render is intact."""
+    meta = render_dir / "timeline.json"
+    if not meta.is_file():
+        return False
+    try:
+        index = read_render_dir(render_dir)
+        bad = [f for f in index.files if not frame_is_intact(f)]
+        problem = f"damaged keyframe {bad[0].name} ({len(bad)} of {len(index.files)})" if bad else None
+    except SimSpadError as exc:
+        problem = exc.message
+    if problem is None:
+        return True
+    log(f"render {render_dir.name}: {problem}; rendering it again")
+    meta.unlink(missing_ok=True)
+    return False

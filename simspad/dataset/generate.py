@@ -31,7 +31,14 @@ from typing import Any, Callable
 
 from tqdm import tqdm
 
-from simspad.dataset.directory import RENDERS_DIR, DatasetLock, remove_temporaries
+from simspad.dataset.directory import (
+    RENDERS_DIR,
+    DatasetLock,
+    check_dataset_owner,
+    check_prune,
+    check_render_cache,
+    remove_temporaries,
+)
 from simspad.dataset.executors import ExecutorConfig, make_executor
 from simspad.dataset.manifest_state import (
     ManifestState,
@@ -62,7 +69,7 @@ class GenerateResult:
 
 def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *, progress: bool = True,
              created_utc: str | None = None, log: Callable[[str], None] | None = None,
-             check: bool = True) -> GenerateResult:
+             check: bool = True, prune: bool = False) -> GenerateResult:
     """Generate (or finish) a dataset.
 
     Parameters
@@ -82,6 +89,9 @@ def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *,
         Receives one-line notices (default: print to stderr when ``progress``).
     check : bool
         Raise :class:`SimSpadError` if any recording failed (after the manifest records why).
+    prune : bool
+        Delete recordings and renders of the previous manifest that the spec no longer lists (without it such a
+        run is refused, naming them).
 
     Returns
     -------
@@ -101,6 +111,7 @@ def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *,
     if log is None:
         log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
     ensure_writable_dir(out_dir, what="dataset output")
+    check_dataset_owner(out_dir, load_previous_manifest(out_dir), spec.name)  # before the lock file is made
     with DatasetLock(out_dir):
         for p in remove_temporaries(out_dir):
             log(f"removed temporary {p.relative_to(out_dir)} left by an interrupted run")
@@ -108,6 +119,7 @@ def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *,
         created = dataset_created_utc(previous, created_utc)
         plan = make_plan(spec, created)
         manifest = ManifestState(out_dir, spec, plan, created, previous)
+        check_prune(out_dir, manifest.obsolete_recordings + manifest.obsolete_renders, prune, log)
         _remove_obsolete(out_dir, manifest, log)
         outcome = _run(out_dir, plan, manifest, executor, progress, log)
     outcome.wall_s = time.perf_counter() - t_start
@@ -155,6 +167,8 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
             entry.pop("error", None)
             todo.append(task)
     needed = {t.render_rel_dir for t in todo}
+    for rel in sorted(needed):
+        check_render_cache(out_dir / rel, log)  # a damaged cached render is rendered again, not re-used forever
     renders = [r for r in plan.renders if r.rel_dir in needed and not (out_dir / r.rel_dir / "timeline.json").is_file()]
     for r in plan.renders:
         if r.rel_dir in needed and r not in renders:

@@ -16,6 +16,7 @@ from typing import Any
 
 from simspad import __version__
 from simspad.dataset.directory import RENDERS_DIR, recording_rel_path
+from simspad.dataset.portable import portable_sequence, portable_trajectory
 from simspad.dataset.spec_hashing import canonical_json, sequence_hash, spec_hash
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_seed
@@ -102,14 +103,14 @@ def make_plan(spec, created_utc: str) -> Plan:
             lux = float(lux)
             stream_key = (seq.name, lux)
             # What the file depends on; stored in the recording as its "spec" attr, so the hash and the file agree.
-            rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": seq.to_dict(), "lux": lux,
+            rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": portable_sequence(seq, spec.source_path), "lux": lux,
                         "stream_key": list(stream_key), "sensors": sensors_dict,
                         "evaluation": spec.evaluation.to_dict(), "optics": dataclasses.asdict(optics)}
             rec_hash = spec_hash({"dataset": spec.name, "sequence": seq_hash, "render": render_hash, "lux": lux,
                                   "stream_key": list(stream_key), "optics": dataclasses.asdict(optics),
                                   "versions": versions})
             metadata = {"sequence": seq.name, "scene": scene, "dataset": spec.name, "spec": canonical_json(rec_spec), "recording_hash": rec_hash,
-                        "created_utc": created_utc}
+                        "created_utc": created_utc, "trajectory": portable_trajectory(seq, spec.source_path)}
             recordings.append(RecordingTask(
                 sequence_name=seq.name, scene=scene, lux=lux, rel_path=recording_rel_path(seq.name, lux),
                 render_rel_dir=render.rel_dir, recording_hash=rec_hash, sensors=sensors, start_s=seq.start_s,

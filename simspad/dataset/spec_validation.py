@@ -14,6 +14,7 @@ import tomllib
 from pathlib import Path
 
 from simspad import defaults
+from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.errors import SimSpadError, SpecError
 from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
@@ -27,6 +28,7 @@ _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution
              "min_rate_hz")
 _EVAL_KEYS = ("rate_hz", "methods")
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+_MAX_NAME_CHARS = 100  # names become file names (255 bytes at most, with suffixes)
 
 
 class _Errors:
@@ -115,10 +117,11 @@ def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> Dat
         if key not in _TOP_KEYS:
             err.add(key, f"unknown top-level key (expected one of {', '.join(_TOP_KEYS)})")
 
-    name = raw.get("name", path.stem)
-    if not isinstance(name, str) or not name.strip():
-        err.add("name", f"got {_type_name(name)} {name!r} (expected a non-empty string)")
-        name = path.stem
+    name = raw.get("name", re.sub(r"[^A-Za-z0-9._-]+", "-", path.stem).strip("-.") or "dataset")
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name) or len(name) > _MAX_NAME_CHARS:
+        err.add("name", f"got {_type_name(name)} {str(name)[:80]!r} (expected up to {_MAX_NAME_CHARS} letters, digits, "
+                "'.', '_' or '-', not starting with '.' or '-'; it names the output folder)")
+        name = re.sub(r"[^A-Za-z0-9._-]+", "-", path.stem).strip("-.") or "dataset"
     description = raw.get("description", "")
     if not isinstance(description, str):
         err.add("description", f"got {_type_name(description)} (expected a string)")
@@ -142,9 +145,12 @@ def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> Dat
     evaluation = _validate_evaluation(raw, err)
     if err.lines:
         return None
-    return DatasetSpec(name=name, seed=seed, output=output_path, sequences=tuple(sequences), lux=tuple(lux),
+    spec = DatasetSpec(name=name, seed=seed, output=output_path, sequences=tuple(sequences), lux=tuple(lux),
                        sensors=sensors, evaluation=evaluation, source_path=path.resolve() if has_file else None,
                        raw=raw)
+    for field_path, message in spec_limit_problems(spec):  # bounds and cross-field rules, before any work
+        err.add(field_path, message)
+    return spec
 
 
 def _validate_lux(raw: dict, err: _Errors) -> list[float]:
@@ -212,7 +218,7 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
             name = name[:-4]
         if name is not None:
             name = re.sub(r"[^A-Za-z0-9._-]+", "-", name).strip("-.") or "sequence"
-    elif not isinstance(name, str) or not _NAME_RE.fullmatch(name):
+    elif not isinstance(name, str) or not _NAME_RE.fullmatch(name) or len(name) > _MAX_NAME_CHARS:
         err.add(f"{where}.name", f"got {_type_name(name)} {name!r} (expected letters, digits, '.', '_' or '-'; it "
                 "names files)")
         name = None

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simspad import defaults
-from simspad.errors import SimSpadError
+from simspad.errors import InputError, SimSpadError
 from simspad.evaluate import metrics
 from simspad.io.results_dir import CROP_PX, crop
 
@@ -57,7 +57,13 @@ def gt_white_point(rec, idx: np.ndarray) -> float:
     """The sequence white point W (ph s⁻¹ m⁻²) of the recording's ground truth at the instants ``idx``."""
     def chunks():
         for i in range(0, idx.size, _WHITE_CHUNK_FRAMES):
-            yield rec.gt.flux(idx[i:i + _WHITE_CHUNK_FRAMES].tolist())
+            block = rec.gt.flux(idx[i:i + _WHITE_CHUNK_FRAMES].tolist())
+            bad = ~np.isfinite(block) | (block < 0)
+            if bad.any():  # every score is measured against it: refuse, naming the first bad frame and pixel
+                k, row, col = np.argwhere(bad)[0]
+                raise InputError(f"ground-truth flux {block[k, row, col]} at pixel (row {row}, col {col}) of frame "
+                                 f"{int(idx[i + k])} (expected finite values ≥ 0)", path=rec.path, field="/gt/flux")
+            yield block
     return metrics.white_point(chunks)
 
 

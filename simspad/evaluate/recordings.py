@@ -1,20 +1,22 @@
 """The recordings to evaluate: a recording file, a dataset directory (``manifest.json``) or a directory of
 ``.h5`` files, each named by a key (``<sequence>_<lux>lx``) in results and submissions.
 
-The manifest is read here with a looser check than :func:`simspad.io.manifest.read_manifest` (an object with a
-``recordings`` list whose entries have a ``path`` string): evaluation accepts any such manifest.
+The manifest is read by :func:`simspad.io.manifest.read_manifest` (the one reader, as ``generate`` uses), every
+path in it is confined to the dataset folder, and each complete recording's size and sha256 are verified
+against the manifest before it is scored.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from simspad.errors import SimSpadError
-from simspad.io.manifest import MANIFEST_NAME
+from simspad.io.manifest import MANIFEST_NAME, recording_mismatch
+from simspad.io.manifest import read_manifest as read_dataset_manifest
 from simspad.io.recording import open_recording
 from simspad.io.results_dir import recording_key
+from simspad.io.safe_paths import confined_path
 
 
 @dataclass
@@ -31,17 +33,11 @@ class RecordingEntry:
 
 
 def read_manifest(dataset_dir: Path) -> dict | None:
-    """The dataset's ``manifest.json`` (None when there is none); SimSpadError when it is malformed."""
-    path = dataset_dir / MANIFEST_NAME
-    if not path.is_file():
+    """The dataset's ``manifest.json`` checked by the one manifest reader (:func:`simspad.io.manifest.read_manifest`:
+    format, version, relative paths); None when the folder has none."""
+    if not (dataset_dir / MANIFEST_NAME).is_file():
         return None
-    try:
-        manifest = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SimSpadError(f"not valid JSON ({exc})", path=path) from None
-    if not isinstance(manifest, dict) or not isinstance(manifest.get("recordings"), list):
-        raise SimSpadError("expected an object with a 'recordings' list", path=path, field="recordings")
-    return manifest
+    return read_dataset_manifest(dataset_dir)
 
 
 def list_recordings(target: Path) -> tuple[list[RecordingEntry], dict | None]:
@@ -68,7 +64,12 @@ def _manifest_entries(target: Path, manifest: dict) -> list[RecordingEntry]:
                                field=f"recordings[{i}].path")
         if r.get("status", "complete") != "complete":
             continue
-        entries.append(RecordingEntry(target / r["path"], r["path"], extra=r))
+        path = confined_path(target, r["path"], source=target / MANIFEST_NAME, field=f"recordings[{i}].path")
+        problem = recording_mismatch(target, r)
+        if problem:
+            raise SimSpadError(f"{problem}: changed or corrupt since it was generated (re-run simspad generate to "
+                               "redo it)", path=path, field=f"manifest recordings[{i}]")
+        entries.append(RecordingEntry(path, r["path"], extra=r))
     return entries
 
 

@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 
 from simspad.errors import InputError
+from simspad.io.safe_paths import refuse_hdf5_links
 
 _REQUIRED = object()
 
@@ -72,6 +73,7 @@ def open_checked(path: str | Path, *, kind: str, format: str, format_version: in
         if version != format_version:
             raise InputError(f"unsupported format_version {version!r} (this SimSPAD reads {format_version})",
                              path=path, field="/.format_version")
+        refuse_hdf5_links(h5, path)
     except BaseException:
         h5.close()
         raise

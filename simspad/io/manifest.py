@@ -32,6 +32,7 @@ import numpy as np
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
+from simspad.io.safe_paths import confined_path
 
 MANIFEST_NAME = "manifest.json"
 FORMAT = "simspad-dataset"
@@ -141,6 +142,29 @@ def validate_manifest(data: Any, path: str | Path) -> None:
         if Path(rec["path"]).is_absolute() or ".." in Path(rec["path"]).parts:
             raise InputError("must be a path relative to the dataset directory", path=path,
                              field=f"recordings[{i}].path")
+        if rec["status"] == "complete" and not (isinstance(rec.get("size"), int) and isinstance(rec.get("sha256"), str)):
+            raise InputError("a complete recording needs its size and sha256", path=path, field=f"recordings[{i}]")
+    for i, ren in enumerate(data.get("renders") or []):
+        rel = ren.get("path") if isinstance(ren, dict) else None
+        if isinstance(rel, str) and (Path(rel).is_absolute() or ".." in Path(rel).parts):
+            raise InputError("must be a path relative to the dataset directory", path=path,
+                             field=f"renders[{i}].path")
+
+
+def recording_mismatch(dataset_dir: str | Path, entry: dict[str, Any]) -> str | None:
+    """Why a complete entry's file does not match the manifest (missing, size, sha256), or None if it does."""
+    path = confined_path(dataset_dir, entry.get("path"), source=manifest_path(dataset_dir), field="recordings.path")
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return "file missing"
+    if size != entry.get("size"):
+        return f"size {size} bytes differs from the manifest's {entry.get('size')}"
+    if not isinstance(entry.get("sha256"), str):
+        return "no sha256 in the manifest"
+    if file_sha256(path) != entry["sha256"]:
+        return "sha256 differs from the manifest's"
+    return None
 
 
 def recording_is_complete(dataset_dir: str | Path, entry: dict[str, Any], recording_hash: str) -> bool:

@@ -23,6 +23,7 @@ import numpy as np
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
 from simspad.io.exr import read_exr, read_exr_info, write_exr
+from simspad.io.safe_paths import confined_path
 
 TIMELINE_FORMAT = "simspad-timeline"
 TIMELINE_VERSION = 1
@@ -95,6 +96,9 @@ def read_render_dir(render_dir: str | Path) -> RenderDirIndex:
     keyframes = meta.get("keyframes")
     if not isinstance(keyframes, list) or not keyframes:
         raise InputError("expected a non-empty list of {t, file}", path=meta_path, field="keyframes")
+    if len(keyframes) < 2:
+        raise InputError("one keyframe: radiance is interpolated between keyframes, so a render directory needs at "
+                         "least two (render a duration > 0)", path=meta_path, field="keyframes")
 
     times, files, poses = [], [], []
     for i, kf in enumerate(keyframes):
@@ -110,7 +114,7 @@ def read_render_dir(render_dir: str | Path) -> RenderDirIndex:
         name = kf.get("file")
         if not isinstance(name, str) or not name:
             raise InputError("expected a frame file name", path=meta_path, field=f"{field}.file")
-        file = render_dir / name
+        file = confined_path(render_dir, name, source=meta_path, field=f"{field}.file")
         if not file.is_file():
             raise InputError(f"frame file {name!r} is missing", path=meta_path, field=f"{field}.file")
         info = read_exr_info(file)
@@ -142,7 +146,8 @@ def read_keyframe(file: Path, width: int, height: int) -> dict[str, np.ndarray]:
     Raises
     ------
     InputError
-        The frame's size differs from ``width`` x ``height``, or its radiance is NaN, infinite or negative.
+        The frame's size differs from ``width`` x ``height``, its radiance is NaN, infinite or negative, or its
+        depth is NaN or negative.
     """
     data = read_exr(file)
     radiance = data.get("rgb", data.get("y"))
@@ -150,6 +155,11 @@ def read_keyframe(file: Path, width: int, height: int) -> dict[str, np.ndarray]:
         raise InputError(f"size {radiance.shape[1]}x{radiance.shape[0]} differs from timeline.json's "
                          f"{width}x{height}", path=file, field="dataWindow")
     _check_radiance(radiance, file, "R,G,B" if "rgb" in data else "Y")
+    depth = data.get("z")
+    if depth is not None and (np.isnan(depth).any() or (depth < 0).any()):
+        row, col = np.argwhere(np.isnan(depth) | (depth < 0))[0][:2]
+        raise InputError(f"depth {depth[row, col]} at pixel (row {row}, col {col}) (expected ≥ 0 metres; 0 where "
+                         "no surface)", path=file, field="Z")
     return data
 
 

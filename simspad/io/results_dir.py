@@ -25,7 +25,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from simspad.errors import SimSpadError
+from simspad.errors import InputError, SimSpadError
+from simspad.io.atomic import check_output_path
+from simspad.io.safe_paths import confined_path
 
 RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "psnr_db", "ssim",
                   "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
@@ -78,9 +80,18 @@ def _parse(col: str, v: str):
 
 
 def read_csv(path: Path) -> list[dict]:
-    """Rows of a results CSV with numbers parsed (unknown columns kept as text)."""
-    with open(path, newline="", encoding="utf-8") as f:
-        return [{k: _parse(k, v) for k, v in row.items()} for row in csv.DictReader(f)]
+    """Rows of a results CSV with numbers parsed (unknown columns kept as text); an ``image`` must name a file
+    inside the results directory (InputError otherwise, as for malformed CSV)."""
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = [{k: _parse(k, v) for k, v in row.items()} for row in csv.DictReader(f)]
+    except (csv.Error, UnicodeDecodeError) as exc:
+        raise InputError(f"not a readable results CSV ({str(exc)[:120]})", path=path) from None
+    for i, row in enumerate(rows):
+        if row.get("image"):
+            confined_path(path.parent, row["image"], source=path, field=f"row {i + 2}: image")
+    return rows
 
 
 def save_png(path: Path, img01: np.ndarray) -> None:
@@ -127,7 +138,8 @@ def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_r
 
 
 def check_output_dir(out_dir: Path) -> None:
-    """Refuse to replace a non-empty directory that is not a SimSPAD results directory."""
+    """Refuse to replace a non-empty directory that is not a SimSPAD results directory (or a link, device...)."""
+    check_output_path(out_dir, kind="dir")
     if out_dir.exists():
         if not out_dir.is_dir():
             raise SimSpadError("exists and is not a directory", path=out_dir, field="--out")

@@ -70,6 +70,8 @@ def load_trajectory(path, *, rebase: bool | None = None) -> TrajectorySet:
     elif suffix == ".json":
         try:
             doc = json.loads(text)
+        except RecursionError:
+            raise InputError("JSON nested too deeply (expected camera/objects tables)", path=source) from None
         except json.JSONDecodeError as exc:
             raise InputError(f"invalid JSON: {exc.msg}", path=source, field=f"line {exc.lineno}") from None
         if not isinstance(doc, dict):
@@ -127,7 +129,7 @@ def _from_csv(text: str, source: str) -> TrajectorySet:
         values = []
         for c in _CSV_COLUMNS:
             try:
-                values.append(float(cells[index[c]]))
+                values.append(_strict_float(cells[index[c]]))
             except ValueError:
                 raise InputError(f"column {c}: {cells[index[c]]!r} is not a number", path=source,
                                  field=f"line {lineno}") from None
@@ -150,7 +152,7 @@ def _from_tum(text: str, source: str) -> TrajectorySet:
             raise InputError(f"{len(cells)} values (expected 8: t tx ty tz qx qy qz qw)", path=source,
                              field=f"line {i + 1}")
         try:
-            rows.append((i + 1, [float(c) for c in cells]))
+            rows.append((i + 1, [_strict_float(c) for c in cells]))
         except ValueError:
             bad = next(c for c in cells if not _is_float(c))
             raise InputError(f"{bad!r} is not a number (expected t tx ty tz qx qy qz qw)", path=source,
@@ -160,9 +162,16 @@ def _from_tum(text: str, source: str) -> TrajectorySet:
     return TrajectorySet(_body_from_rows(rows, source, CAMERA_BODY), {}, source)
 
 
+def _strict_float(s: str) -> float:
+    """``float(s)`` without Python's digit separators: ``1_0`` is a typo in a data file, not 10."""
+    if "_" in s:
+        raise ValueError(s)
+    return float(s)
+
+
 def _is_float(s: str) -> bool:
     try:
-        float(s)
+        _strict_float(s)
     except ValueError:
         return False
     return True

@@ -56,7 +56,7 @@ def _body_from_table(table, where: str, source: str) -> Trajectory:
         raise InputError("must be a table with 'keyframes' or 'generator'", path=source, field=where)
     if "generator" in table:
         name = table["generator"]
-        if name not in GENERATORS:
+        if not isinstance(name, str) or name not in GENERATORS:
             raise InputError(f"unknown generator {name!r} (expected one of {', '.join(GENERATORS)})", path=source,
                              field=f"{where}.generator")
         builder, allowed = GENERATORS[name]

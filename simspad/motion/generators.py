@@ -13,11 +13,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from simspad import defaults
 from simspad.motion.trajectory import Trajectory, look_at
 
 
 def _frame_count(duration_s: float, rate_hz: float) -> int:
-    return max(2, int(math.ceil(duration_s * rate_hz - 1e-9)) + 1)
+    n = duration_s * rate_hz
+    if not n <= defaults.MAX_GENERATOR_SAMPLES:  # also NaN: refuse before allocating (rpm = 1e15 wanted PiB)
+        raise ValueError(f"needs {n:.3g} samples ({duration_s:g} s at {rate_hz:.3g} Hz, set by the speed and "
+                         f"rate_hz); the limit is {defaults.MAX_GENERATOR_SAMPLES:,}: check the units of the "
+                         "speed, rate_hz and duration_s")
+    return max(2, int(math.ceil(n - 1e-9)) + 1)
 
 
 def static_pose(position_m=(0.0, 0.0, 0.0), quaternion_xyzw=(0.0, 0.0, 0.0, 1.0), *, duration_s: float = 1.0,

@@ -21,6 +21,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, RotationSpline
 
+from simspad import defaults
 from simspad.errors import InputError
 
 QUATERNION_NORM_TOLERANCE = 1e-3
@@ -219,10 +220,18 @@ def check_keyframes(times_s, positions_m, quats, source: str, rows: list[str] | 
             i = int(np.argmax(bad))
             raise InputError(f"{name} is not finite (NaN or inf) (expected finite numbers)", path=source,
                              field=where(i))
+    for name, arr, limit, unit in (("t", times_s, defaults.MAX_TRAJECTORY_TIME_S, "s"),
+                                   ("position", positions_m, defaults.MAX_TRAJECTORY_POSITION_M, "m")):
+        big = (np.abs(np.asarray(arr, dtype=np.float64).reshape(len(arr), -1)) > limit).any(axis=1)
+        if big.any():
+            i = int(np.argmax(big))
+            raise InputError(f"{name} beyond ±{limit:g} {unit} (expected times in seconds and positions in metres)",
+                             path=source, field=where(i))
     steps = np.diff(times_s)
     if (steps <= 0).any():
         i = int(np.argmax(steps <= 0)) + 1
-        raise InputError(f"time {times_s[i]!r} s does not increase (previous keyframe at {times_s[i - 1]!r} s; "
+        raise InputError(f"time {float(times_s[i])!r} s does not increase (previous keyframe at "
+                         f"{float(times_s[i - 1])!r} s; "
                          "expected strictly increasing times)", path=source, field=where(i))
     norms = np.linalg.norm(quats, axis=1)
     bad = np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.errors import SimSpadError
-from simspad.io.exr import write_exr
+from simspad.io.exr import read_exr, write_exr
 
 
 def make_out_dir(out_dir: Path) -> list[Path]:
@@ -65,6 +65,18 @@ def frame_names(base: dict, times: np.ndarray) -> list[str]:
 def write_frame(path: Path, rgb: np.ndarray, depth: np.ndarray) -> None:
     """Write linear radiance ``rgb`` [H, W, 3] and depth ``depth`` [H, W] (m) as channels R, G, B, Z."""
     write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": depth})
+
+
+def frame_is_intact(path: Path) -> bool:
+    """True if the cached keyframe at ``path`` decodes completely (every scanline; ZIP blocks carry checksums),
+    holds radiance and depth, and is finite: a truncated or damaged EXR is then re-rendered, not re-used."""
+    try:
+        data = read_exr(path)
+    except Exception:  # noqa: BLE001 - InputError or whatever OpenEXR raises on a damaged file: not intact
+        return False
+    rgb, depth = data.get("rgb"), data.get("z")
+    return (rgb is not None and depth is not None and rgb.shape[:2] == depth.shape
+            and bool(np.isfinite(rgb).all()) and bool(np.isfinite(depth).all()))
 
 
 def remove_stale_frames(out_dir: Path, keep: set[str]) -> None:

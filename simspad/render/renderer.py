@@ -26,6 +26,7 @@ from simspad.io.render_dir import write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
 from simspad.render.flow import camera_poses, max_step_flow, near_depth, object_poses, predicted_flow_fn
+from simspad.render.keyframe_files import frame_is_intact
 from simspad.render.keyframe_files import frame_names, make_out_dir, remove_created, remove_stale_frames, write_frame
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.mitsuba_scene import (
@@ -193,7 +194,7 @@ def _render_frames(ms: MitsubaScene, ts: TrajectorySet, frames: list, seed: int,
     t_render = time.perf_counter()
     try:
         for t, camera_to_world, path in frames:
-            if path.is_file():
+            if path.is_file() and frame_is_intact(path):  # a damaged cached frame is rendered again
                 n_reused += 1
                 bar.update(1)
                 continue

@@ -9,9 +9,13 @@ depth and the focal length in pixels (:func:`camera_flow_bound`, :func:`object_f
 from __future__ import annotations
 
 import math
+import os
 from typing import Callable
 
 import numpy as np
+
+from simspad import defaults
+from simspad.errors import SimSpadError
 
 #: Grid cells per smallest keyframe interval when integrating the predicted image speed.
 _CELLS_PER_STEP = 4
@@ -54,6 +58,13 @@ def keyframe_schedule(t0: float, t1: float, max_flow_fn: Callable[[np.ndarray], 
     coarse = np.linspace(t0, t1, max(2, min(4097, int(math.ceil((t1 - t0) / max_step_s)) * 2 + 1)))
     v_peak = float(np.max(np.abs(max_flow_fn(coarse))))
     step_s = max_step_s if v_peak <= 0 else min(max_step_s, max_flow_px / v_peak)
+    n_keyframes = (t1 - t0) / step_s
+    if not n_keyframes <= defaults.MAX_KEYFRAMES and os.environ.get("SIMSPAD_IGNORE_LIMITS", "") != "1":
+        # Refuse before allocating the integration grid (a 0.5 m jump in 0.1 µs asked for gigabytes).
+        raise SimSpadError(f"the motion needs up to {n_keyframes:.3g} keyframes (peak image speed {v_peak:.3g} px/s "
+                           f"at max_flow_px = {max_flow_px:g} over {t1 - t0:g} s); the limit is "
+                           f"{defaults.MAX_KEYFRAMES:,}: check the trajectory for a jump or a unit slip, or raise "
+                           "max_flow_px (SIMSPAD_IGNORE_LIMITS=1 to try anyway)", field="trajectory")
     n_cells = max(1, int(math.ceil((t1 - t0) / step_s * _CELLS_PER_STEP)))
     grid = np.linspace(t0, t1, n_cells + 1)
     speed = np.abs(np.asarray(max_flow_fn(grid), dtype=np.float64))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from dataclasses import dataclass
 
 from simspad import defaults
@@ -70,8 +71,46 @@ class RenderSettings:
             bad("spp", f"must be an integer >= 1, got {spp!r}")
         if not (max_flow_px > 0):
             bad("max_flow_px", f"must be > 0 pixels, got {max_flow_px!r}")
-        if not (min_rate_hz > 0):
-            bad("min_rate_hz", f"must be > 0 Hz, got {min_rate_hz!r}")
-        if not isinstance(seed, numbers.Integral) or seed < 0:
-            bad("seed", f"must be an integer >= 0, got {seed!r}")
+        if not (min_rate_hz > 0 and math.isfinite(min_rate_hz)):
+            bad("min_rate_hz", f"must be a finite number of Hz > 0, got {min_rate_hz!r}")
+        if not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**64:
+            bad("seed", f"must be an integer in [0, 2**64), got {seed!r}")
+        for field_name, message in render_limit_problems(width, height, spp, max_flow_px, min_rate_hz, duration_s):
+            bad(field_name, message)
         return width, height
+
+
+def limits_ignored() -> bool:
+    """True when ``SIMSPAD_IGNORE_LIMITS=1`` lifts the size bounds (resolution, spp, keyframe count)."""
+    return os.environ.get("SIMSPAD_IGNORE_LIMITS", "") == "1"
+
+
+def render_limit_problems(width: int, height: int, spp: int, max_flow_px: float, min_rate_hz: float,
+                          duration_s: float) -> list[tuple[str, str]]:
+    """(field, message) for every value past the resource bounds of :mod:`simspad.defaults`, with the figure.
+
+    The size bounds are refused with the memory or count they would need; ``SIMSPAD_IGNORE_LIMITS=1`` lifts
+    them. ``max_flow_px`` below its floor is refused always (it only multiplies work).
+    """
+    out = []
+    lift = " (set SIMSPAD_IGNORE_LIMITS=1 to try anyway)"
+    if not max_flow_px >= defaults.MIN_MAX_FLOW_PX or not math.isfinite(max_flow_px):
+        out.append(("max_flow_px", f"must be a finite number ≥ {defaults.MIN_MAX_FLOW_PX} px, got {max_flow_px!r} "
+                    "(smaller steps only multiply the keyframes)"))
+    if limits_ignored():
+        return out
+    pixels = width * height
+    if pixels > defaults.MAX_RENDER_PIXELS:
+        need = pixels * defaults.RENDER_BYTES_PER_PIXEL / 2**30
+        out.append(("resolution", f"{width}×{height} = {pixels / 1e6:.1f} Mpx needs about {need:.1f} GiB of memory "
+                    f"per render process; the limit is {defaults.MAX_RENDER_PIXELS / 1e6:.1f} Mpx{lift}"))
+    if spp > defaults.MAX_SPP:
+        out.append(("spp", f"{spp} samples per pixel is above the limit of {defaults.MAX_SPP}{lift}"))
+    if duration_s > defaults.MAX_DURATION_S:
+        out.append(("duration", f"{duration_s:g} s is above the limit of {defaults.MAX_DURATION_S:g} s (times "
+                    f"in µs written as seconds?){lift}"))
+    n_min = duration_s * min_rate_hz
+    if math.isfinite(n_min) and n_min > defaults.MAX_KEYFRAMES:
+        out.append(("min_rate_hz", f"{min_rate_hz:g} Hz over {duration_s:g} s asks for {n_min:.3g} keyframes; the "
+                    f"limit is {defaults.MAX_KEYFRAMES:,}{lift}"))
+    return out

@@ -5,6 +5,10 @@ animated objects) and either ``scene.py`` exposing ``build() -> dict`` (for ``mi
 A user's scene is any folder holding one Mitsuba 3 ``.xml`` with a perspective sensor (or the path of that
 ``.xml``); an optional ``scene.toml`` beside it supplies the same fields as for built-in scenes.
 
+A user's folder holding ``scene.py`` + ``scene.toml`` is Python code: it runs only when the user opts in
+(``simspad --allow-python-scenes ...`` or ``SIMSPAD_ALLOW_PYTHON_SCENES=1``); otherwise it is refused, so naming
+a downloaded folder never executes it. Built-in scenes are code shipped with SimSPAD and always run.
+
 Relative ``default_trajectory`` paths resolve against the repository root for built-in scenes (they point into
 ``trajectories/``) and against the scene folder for users' scenes.
 """
@@ -13,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import os
 import tomllib
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -26,6 +31,21 @@ _ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 #: scene's first sensor.
 DEFAULT_CAMERA_ID = "camera"
 _PERSPECTIVE_TYPES = ("perspective", "thinlens")
+#: Environment variable that opts in to running users' ``scene.py`` (set by ``--allow-python-scenes``, inherited
+#: by worker processes).
+ALLOW_PYTHON_SCENES_ENV = "SIMSPAD_ALLOW_PYTHON_SCENES"
+
+
+def python_scenes_allowed() -> bool:
+    """True when the user opted in to running their own ``scene.py`` scenes."""
+    return os.environ.get(ALLOW_PYTHON_SCENES_ENV, "") == "1"
+
+
+def _refuse_python_scene(folder: Path) -> None:
+    raise SimSpadError("this scene folder holds scene.py, which is Python code; SimSPAD runs a user's Python scene "
+                       f"only when asked: add --allow-python-scenes (simspad --allow-python-scenes COMMAND ...) or "
+                       f"set {ALLOW_PYTHON_SCENES_ENV}=1 if you trust it, or give a Mitsuba .xml scene",
+                       path=folder, field="scene")
 
 
 @dataclass(frozen=True)
@@ -91,7 +111,10 @@ def resolve_scene(name_or_path) -> SceneInfo:
     path = Path(text).expanduser()
     if path.is_dir():
         if (path / "scene.py").is_file() and (path / "scene.toml").is_file():
-            return _folder_info(path, builtin=path.resolve().parent == SCENES_DIR.resolve())
+            builtin = path.resolve().parent == SCENES_DIR.resolve()
+            if not builtin and not python_scenes_allowed():
+                _refuse_python_scene(path)
+            return _folder_info(path, builtin=builtin)
         return _user_info(_find_xml(path), name=path.resolve().name)
     if path.is_file():
         if path.suffix.lower() != ".xml":
@@ -115,6 +138,8 @@ def scene_dict_or_file(info: SceneInfo) -> dict | Path:
     if info.source is None:
         raise SimSpadError("scene has neither scene.py nor an .xml file", path=info.folder, field="scene")
     if info.source.suffix == ".py":
+        if not info.builtin and not python_scenes_allowed():
+            _refuse_python_scene(info.folder)
         module = _load_builder(info.source)
         build = getattr(module, "build", None)
         if not callable(build):

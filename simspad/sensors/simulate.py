@@ -26,6 +26,7 @@ from simspad.radiance.timeline import Timeline
 from simspad.sensors import events, frames, spad
 from simspad.sensors.ground_truth import write_ground_truth
 from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs
+from simspad.sensors.recording_size import check_recording_size
 
 #: Instants this close beyond the render's last keyframe are accepted (round-off of start + duration).
 _TIME_TOLERANCE_S = 1e-9
@@ -95,6 +96,9 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     lux, sensors, seed, stream_key = settings.lux, settings.sensors, settings.seed, settings.stream_key
     if not (isinstance(lux, (int, float)) and math.isfinite(lux) and lux > 0):
         raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="lux")
+    if not defaults.LUX_RANGE[0] <= lux <= defaults.LUX_RANGE[1]:
+        raise SimSpadError(f"{lux:g} lx is outside {defaults.LUX_RANGE[0]:g}–{defaults.LUX_RANGE[1]:g} lx (such a level "
+                           "gives NaN or all-zero images)", field="lux")
     for kind in sensors:
         if kind not in SENSOR_KINDS:
             raise SimSpadError(f"unknown sensor {kind!r} (expected one of {', '.join(SENSOR_KINDS)})",
@@ -105,6 +109,7 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     tl = Timeline.open(render_dir)
     _validate_sensors(sensors, tl.height)
     t0, t1 = _interval(tl, settings.start_s, settings.duration_s, render_dir)
+    check_recording_size(sensors, t1 - t0, tl.width, tl.height, settings.gt_rate_hz, out_path)  # before any write
     flux_tl = tl.photon_flux(lux, optics)
     runners = {"spad": lambda w, p, rng: spad.simulate_spad(w, flux_tl, t0, t1, p, rng, progress),
                "frames": lambda w, p, rng: frames.simulate_frames(w, flux_tl, t0, t1, p, rng, progress),

@@ -29,10 +29,10 @@ SCENE = "siemens-star"
 pytestmark = pytest.mark.slow  # every test here generates (or re-generates) a dataset
 
 
-def _write_spec(path: Path, *, lux=(1, 100), spp_b=2, duration_s=0.008, seed=7) -> Path:
+def _write_spec(path: Path, *, lux=(1, 100), spp_b=2, duration_s=0.008, seed=7, name="tiny") -> Path:
     lux_text = ", ".join(str(x) for x in lux)
     path.write_text(f"""
-name = "tiny"
+name = "{name}"
 seed = {seed}
 output = "{path.parent / 'unused'}"
 lux = [{lux_text}]
@@ -171,7 +171,13 @@ def test_spec_change_redoes_only_what_changed(tiny):
     before = {e["path"]: (_stat(changed, e["path"]), e["sha256"]) for e in read_manifest(changed)["recordings"]}
     # Sequence b renders with more samples; the 100 lx level becomes 1000 lx.
     spec2 = load_spec(_write_spec(root / "changed.toml", lux=(1, 1000), spp_b=4))
-    res = generate(spec2, changed, ExecutorConfig("dask", workers=2), progress=False)
+    # Without --prune nothing is deleted: the run is refused, naming what it would remove.
+    with pytest.raises(SimSpadError, match=r"no longer lists 3 item\(s\).*a_100lx\.h5.*--prune"):
+        generate(spec2, changed, ExecutorConfig("dask", workers=2), progress=False)
+    assert (changed / "recordings/a/a_100lx.h5").exists()
+    logged = []
+    res = generate(spec2, changed, ExecutorConfig("dask", workers=2), progress=False, prune=True, log=logged.append)
+    assert any(line.startswith("--prune: removing") and "a_100lx.h5" in line for line in logged)
     assert sorted(res.skipped) == ["recordings/a/a_1lx.h5"]
     assert sorted(res.done) == ["recordings/a/a_1000lx.h5", "recordings/b/b_1000lx.h5", "recordings/b/b_1lx.h5"]
     assert [Path(r).name.rsplit("-", 1)[0] for r in res.renders_done] == ["b"]
@@ -182,6 +188,21 @@ def test_spec_change_redoes_only_what_changed(tiny):
     assert all(e["status"] == "complete" for e in m["recordings"])
     assert m["recordings"][2]["sha256"] != before["recordings/b/b_1lx.h5"][1]  # b re-rendered → new data
     assert len(list((changed / "renders").iterdir())) == 2  # the old render of b is gone
+
+
+def test_other_dataset_or_foreign_folder_is_refused(tiny, simspad_cli):
+    root, _, out, _ = tiny
+    before = (out / "manifest.json").read_bytes()
+    other = _write_spec(root / "other.toml", name="other")
+    proc = simspad_cli.run("generate", other, "--out", out)
+    assert proc.returncode == 2 and "holds the dataset 'tiny', not 'other'" in proc.stderr
+    assert (out / "manifest.json").read_bytes() == before
+    home = root / "home"
+    home.mkdir()
+    (home / "thesis.tex").write_text("years of work")
+    with pytest.raises(SimSpadError, match="not a SimSPAD dataset.*thesis.tex"):
+        generate(load_spec(other), home, progress=False)
+    assert [p.name for p in home.iterdir()] == ["thesis.tex"]
 
 
 def _children(pid: int) -> list[int]:

@@ -188,6 +188,23 @@ BAD = {
     "no_sequences": (GOOD.split("[[sequences]]")[0], ["sequences"], "missing"),
     "evaluation_rate": (GOOD.replace("rate_hz = 500", "rate_hz = -500"), ["evaluation.rate_hz"], "> 0"),
     "unknown_method": (GOOD.replace('"nedi_akf"]', '"magic"]'), ["evaluation.methods[1]"], "unknown method"),
+    # Resource bounds and cross-field rules (issue 14): refused by `simspad info`, before any render.
+    "resolution_huge": (GOOD.replace("[32, 24]", "[16000, 16000]"), ["sequences[0].resolution"], "GiB of memory"),
+    "spp_huge": (GOOD.replace("spp = 4", "spp = 9223372036854775807"), ["sequences[0].spp"], "limit of 65536"),
+    "max_flow_tiny": (GOOD.replace("max_flow_px = 0.25", "max_flow_px = 1e-12"), ["sequences[1].max_flow_px"],
+                      "≥ 0.01 px"),
+    "lux_out_of_range": (GOOD.replace("lux = [1, 10.5, 1e4]", "lux = [1e30, 1e-300]"), ["lux[0]", "lux[1]"],
+                         "outside 1e-06–1e+06 lx"),
+    "bit_depth_64": (GOOD.replace("exposure_s = 0.002", "exposure_s = 0.002\nbit_depth = 64"),
+                     ["sensors.frames.bit_depth"], "between 1 and 16"),
+    "bin_s_femto": (GOOD.replace("gate_s = 1e-6", "gate_s = \"auto\"\nbin_s = 1e-15\nmin_gate_s = 1e-16"),
+                    ["sensors.spad.bin_s", "sensors.spad.bin_s", "sensors.spad.bin_s"], "dead time"),
+    "frame_rate_giga": (GOOD.replace("exposure_s = 0.002", "exposure_s = \"auto\"\nframe_rate_hz = 1e9"),
+                        ["sensors.frames.frame_rate_hz"], "above the limit of 1e+06 Hz"),
+    "shorter_than_a_frame": (GOOD.replace("exposure_s = 0.002", "exposure_s = 0.002\nframe_rate_hz = 10"),
+                             ["sequences[0].duration_s"], "shorter than one period of sensors.frames.frame_rate_hz"),
+    "dataset_name_escapes": (GOOD.replace('name = "unit"', 'name = "../../evil"'), ["name"], "names the output"),
+    "dataset_name_too_long": (GOOD.replace('name = "unit"', f'name = "{"a" * 300}"'), ["name"], "up to 100"),
 }
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from simspad.io.hashing import file_sha256
 from simspad.io.recording import RecordingWriter
 from simspad.physics.spad_statistics import detection_probability
 from simspad.sensors.presets import sensor_params
@@ -67,12 +68,13 @@ def write_dataset(root: Path, luxes=(10.0, 100.0), sequences=("ramp",), incomple
             (root / rel).parent.mkdir(parents=True, exist_ok=True)
             write_recording(root / rel, sequence=seq, scene=seq, lux=lux, level=3e15 * (lux / 10.0) ** 0.6,
                             seed=int(lux))
-            recs.append({"sequence": seq, "scene": seq, "lux": lux, "path": rel, "size": 0, "sha256": "",
-                         "status": "complete"})
+            recs.append({"sequence": seq, "scene": seq, "lux": lux, "path": rel, "size": (root / rel).stat().st_size,
+                         "sha256": file_sha256(root / rel), "status": "complete"})
     if incomplete:
         recs.append({"sequence": "ghost", "scene": "ghost", "lux": 1.0, "path": "recordings/ghost/ghost_1lx.h5",
                      "size": 0, "sha256": "", "status": "failed"})
-    (root / "manifest.json").write_text(json.dumps({"spec": {"evaluation": {"rate_hz": 1000.0}},
+    (root / "manifest.json").write_text(json.dumps({"format": "simspad-dataset", "version": 1, "name": "eval",
+                                                    "spec": {"evaluation": {"rate_hz": 1000.0}},
                                                     "spec_hash": "x", "seed": 0, "recordings": recs}))
     return root
 

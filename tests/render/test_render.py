@@ -318,3 +318,23 @@ def test_scene_loads_list_emitters_in_canonical_order():
     orders = {tuple(emitter_order(load_canonical(mi, source, "office"))) for _ in range(8)}
     assert len(orders) == 1 and list(next(iter(orders))) == sorted(next(iter(orders)))
     assert len(next(iter(orders))) >= 3
+
+
+# ------------------------------------------------------------------------------------------ damaged cache
+def test_a_truncated_cached_keyframe_is_rendered_again(tmp_path):
+    from simspad.dataset.directory import check_render_cache
+    from simspad.io.hashing import file_sha256
+
+    folder = _textured_folder(tmp_path / "tex")
+    settings = RenderSettings(duration_s=0.002, resolution=(W, H), spp=2)
+    first = render_sequence(folder, None, settings, out_dir=tmp_path / "r", progress=False)
+    frames = sorted((tmp_path / "r" / "frames").glob("*.exr"))
+    good = file_sha256(frames[1])
+    frames[1].write_bytes(frames[1].read_bytes()[: frames[1].stat().st_size // 2])  # a disk that filled up
+    logged = []
+    assert not check_render_cache(tmp_path / "r", logged.append)  # generate's check: timeline removed, re-render
+    assert "damaged keyframe" in logged[0] and not (tmp_path / "r" / "timeline.json").exists()
+    again = render_sequence(folder, None, settings, out_dir=tmp_path / "r", progress=False)
+    assert again.n_reused == first.n_keyframes - 1 and again.n_rendered == 1
+    assert file_sha256(frames[1]) == good  # re-rendered bit-identically
+    assert check_render_cache(tmp_path / "r", logged.append) and len(logged) == 1

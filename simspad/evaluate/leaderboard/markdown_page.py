@@ -1,6 +1,6 @@
 """``leaderboard.md``: the tables in markdown, linking the plots and strips written beside it as PNG files.
 
-Every user-supplied string is escaped with :func:`html.escape`, and ``|`` in table cells.
+Every user-supplied string is escaped with :func:`html.escape`, and Markdown's syntax characters with a backslash.
 """
 
 from __future__ import annotations
@@ -11,8 +11,14 @@ from simspad.evaluate.leaderboard.board import DAGGER, Board, failed_runs, lux_l
 from simspad.evaluate.leaderboard.tables import MTF_NOTE, lux_table, mtf_table, summary_cells, table_cells
 
 
+#: Markdown syntax characters escaped with a backslash in user text, so a method name cannot become a link, an
+#: image (both need ``[``), emphasis or code: ``[x](http://evil)`` shows as written; ``(S)`` stays readable.
+_MD_SPECIAL = "\\`*_[]|"
+
+
 def md_escape(text: str) -> str:
-    return html.escape(str(text)).replace("|", "\\|").replace("\n", " ")
+    text = html.escape(str(text)).replace("\n", " ")
+    return "".join("\\" + c if c in _MD_SPECIAL else c for c in text)
 
 
 def md_table(header, body, text_columns: int = 2) -> str:

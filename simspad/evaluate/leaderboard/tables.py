@@ -97,6 +97,14 @@ MTF_NOTE = ("MTF50 in cycles per pixel relative to the ground truth (0.5 = stays
             "Nyquist; – = already below 0.5 at the lowest measured frequency, or no star).")
 
 
+def csv_safe(value):
+    """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR first) gets a
+    leading apostrophe (the OWASP rule); numbers pass unchanged."""
+    if isinstance(value, str) and value[:1] in ("=", "+", "-", "@", "\t", "\r"):
+        return "'" + value
+    return value
+
+
 def write_csv_table(path: Path, board: Board) -> None:
     cols = ["method", "label", "sensors", "absolute_scale", "bandwidth_khz_per_pixel",
             "bandwidth_bits_per_pixel_s"] + [f"psnr_db[{s}@{l:g}lx]" for s, l in board.columns] + \
@@ -106,7 +114,7 @@ def write_csv_table(path: Path, board: Board) -> None:
         w.writerow(cols)
         for m in board.methods:
             i = board.info[m]
-            w.writerow([m, i["label"], i["sensors"], "true" if i["absolute_scale"] else "false",
+            w.writerow([csv_safe(m), csv_safe(i["label"]), csv_safe(i["sensors"]), "true" if i["absolute_scale"] else "false",
                         i["bw_khz_mean"], i["bw_bits_mean"]] +
                        [board.psnr.get((m, s, l), float("nan")) for s, l in board.columns] +
                        [i["psnr_mean"], i["ssim_mean"], len(i["errors"])])

@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 import h5py
+import numpy as np
 
 from simspad.errors import InputError
 from simspad.io.hdf5 import decode_attr, open_checked
@@ -128,18 +129,38 @@ def open_recording(path: str | Path) -> Recording:
     return Recording(path, h5)
 
 
+def _scalar_attr(h5: h5py.File, key: str, path: Path, *, integer: bool) -> None:
+    """A required root attribute is one finite number (a positive integer for width and height)."""
+    value = decode_attr(h5.attrs[key])
+    if isinstance(value, np.ndarray) and value.size == 1:
+        value = value.reshape(()).item()
+    if isinstance(value, np.generic):
+        value = value.item()
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+    if ok and integer:
+        ok = float(value).is_integer() and value > 0
+    if not ok:
+        expected = "a positive integer" if integer else "a finite number"
+        raise InputError(f"expected {expected}, got {str(value)[:60]!r}", path=path, field=f"/.{key}")
+
+
 def _check_layout(h5: h5py.File, path: Path) -> None:
     """InputError naming the first missing root attribute, dataset or group attribute, or a mismatched shape."""
     for key in REQUIRED_ROOT_ATTRS:
         if key not in h5.attrs:
             raise InputError("missing root attribute", path=path, field=f"/.{key}")
+        _scalar_attr(h5, key, path, integer=key in ("width", "height"))
     H, W = int(h5.attrs["height"]), int(h5.attrs["width"])
     for group, names in REQUIRED_DATASETS.items():
         if group not in h5:
             continue
+        if not isinstance(h5[group], h5py.Group):
+            raise InputError("expected a group, found a dataset", path=path, field=f"/{group}")
         for name in names:
             if name not in h5:
                 raise InputError("dataset missing", path=path, field=f"/{name}")
+            if not isinstance(h5[name], h5py.Dataset):
+                raise InputError("expected a dataset, found a group", path=path, field=f"/{name}")
     for group, keys in REQUIRED_GROUP_ATTRS.items():
         if group in h5:
             for key in keys:

@@ -8,18 +8,36 @@ at a time, so the byte layout does not depend on how the simulator batches its r
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from simspad.io.atomic import ensure_writable_dir, temporary_sibling
+from simspad.io.atomic import (
+    check_output_path,
+    disk_full_error,
+    ensure_writable_dir,
+    fsync_file,
+    is_disk_full,
+    remove_stale_temporaries,
+    temporary_sibling,
+)
 from simspad.io.recording.layout import FORMAT, FORMAT_VERSION
 
 #: HDF5 library version bounds of the file (fixed: the byte layout depends on them).
 _LIBVER = ("v110", "v110")
+#: Set when closing an HDF5 file failed (full disk): the library keeps a half-closed file that it tries to close
+#: again at process exit, where it crashes (SIGSEGV). :func:`hdf5_close_failed` lets the CLI exit without that.
+_CLOSE_FAILED = False
+
+
+def hdf5_close_failed() -> bool:
+    """True once an HDF5 close failed in this process (the process should then end with ``os._exit``)."""
+    return _CLOSE_FAILED
 
 
 def _attr_value(value):
@@ -35,6 +53,29 @@ def _attr_value(value):
     if isinstance(value, Path):
         return str(value)
     return value
+
+
+def _mark_close_failed() -> None:
+    global _CLOSE_FAILED
+    _CLOSE_FAILED = True
+
+
+def _install_quiet_dealloc_hook() -> None:
+    """Drop h5py's "Exception ignored in ObjectID.__dealloc__" tracebacks caused by a full disk: each failed write
+    frees temporary HDF5 objects whose release fails again; the writer reports the full disk once, as one line.
+    Every other unraisable exception passes to the previous hook."""
+    previous = sys.unraisablehook
+    if getattr(previous, "_simspad_quiet_dealloc", False):
+        return
+
+    def hook(unraisable):
+        exc = unraisable.exc_value
+        if isinstance(exc, RuntimeError) and "id ref count" in str(exc) and is_disk_full(exc):
+            return
+        previous(unraisable)
+
+    hook._simspad_quiet_dealloc = True
+    sys.unraisablehook = hook
 
 
 class Appender:
@@ -112,28 +153,65 @@ class RecordingWriter:
         self._appenders: list[Appender] = []
 
     def __enter__(self) -> "RecordingWriter":
+        check_output_path(self.path, kind="file")
         ensure_writable_dir(self.path.parent)
+        remove_stale_temporaries(self.path)
+        _install_quiet_dealloc_hook()
         self.tmp_path = temporary_sibling(self.path)
-        self.h5 = h5py.File(self.tmp_path, "w", libver=_LIBVER)
-        self.set_attrs("/", format=FORMAT, format_version=FORMAT_VERSION, **self.attrs)
+        try:
+            self.h5 = h5py.File(self.tmp_path, "w", libver=_LIBVER)
+            self.set_attrs("/", format=FORMAT, format_version=FORMAT_VERSION, **self.attrs)
+        except BaseException as exc:
+            self._discard()
+            if is_disk_full(exc):
+                raise disk_full_error(self.path) from None
+            raise
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
+        # The file gets its final name only after every row is written, the HDF5 file closed and its bytes
+        # fsynced, all without error; on any failure the temporary is removed (a full disk: one line naming it).
+        failure = exc
         try:
-            if exc_type is None:
+            if failure is None:
                 for appender in self._appenders:
                     appender.flush()
-        finally:
-            self._close(exc_type)
-
-    def _close(self, exc_type) -> None:
+        except BaseException as e:
+            failure = e
+        self._appenders = []
+        if failure is not None and is_disk_full(failure):
+            _mark_close_failed()  # before h5py frees this file's objects, which fail again on the full disk
         try:
-            self.h5.close()
-        finally:
-            if exc_type is None:
+            try:
+                self.h5.close()
+            except BaseException:
+                _mark_close_failed()
+                raise
+            self.h5 = None
+            if failure is None:
+                fsync_file(self.tmp_path)
+                check_output_path(self.path, kind="file")
                 os.replace(self.tmp_path, self.path)
-            else:
-                self.tmp_path.unlink(missing_ok=True)
+                return
+        except BaseException as e:
+            failure = failure or e
+        self._discard()
+        if is_disk_full(failure):
+            raise disk_full_error(self.path) from None
+        if failure is not exc:
+            raise failure
+
+    def _discard(self) -> None:
+        """Close (best effort) and delete the temporary file."""
+        if self.h5 is not None:
+            try:
+                self.h5.close()
+            except Exception:  # noqa: BLE001 - closing a file whose write failed may fail again; it is deleted
+                _mark_close_failed()
+        if self.tmp_path is not None:
+            with contextlib.suppress(OSError):
+                os.truncate(self.tmp_path, 0)  # HDF5 may still hold it open: free its blocks now
+            self.tmp_path.unlink(missing_ok=True)
 
     def set_attrs(self, group: str, **attrs) -> None:
         """Set attributes on ``group`` (created if needed); dicts are stored as JSON text."""
