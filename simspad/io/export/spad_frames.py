@@ -31,10 +31,8 @@ import numpy as np
 
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
+from simspad.io.export import FRAME_FORMATS, PACKINGS
 from simspad.io.exr import write_exr
-
-PACKINGS = ("packed", "unpacked")
-FRAME_FORMATS = ("png", "tiff")
 #: Binary frames read and written per step.
 SPAD_CHUNK_BINS = 4096
 

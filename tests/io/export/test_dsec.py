@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from simspad.errors import InputError
-from simspad.io.export import export_recording
+from simspad.io.export.dispatch import export_recording
 from tests.io.export.conftest import write_event_recording
 from tests.io.export.dsec_eventslicer import EventSlicer
 
