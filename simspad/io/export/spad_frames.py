@@ -27,7 +27,9 @@ import json
 import zipfile
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
+import tifffile
 
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
@@ -110,9 +112,6 @@ def _write_spad(rec, path: Path, packing: str, chunk_bins: int) -> None:
 
 
 def _write_frames(rec, directory: Path, frames_format: str) -> None:
-    import imageio.v3 as iio  # deferred: image writers load only for this export
-    import tifffile  # deferred: image writers load only for this export
-
     directory.mkdir()
     frames = rec.frames
     t_start, t_end = frames.t_start, frames.t_end
