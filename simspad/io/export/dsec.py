@@ -12,7 +12,7 @@ Layout (DSEC, Gehrig et al. 2021)::
 ``t_offset`` is the recording's start rounded down to a whole millisecond, so ``t`` starts near 0 as in DSEC and
 ``t + t_offset`` is the recording's own time base (µs since the timeline's t = 0). ``ms_to_idx`` is recomputed
 while the events stream through (from the offset, not copied), which also checks that the events are sorted.
-Datasets are gzip-compressed with h5py's built-in filter (DSEC's files use Blosc through ``hdf5plugin``; gzip
+The same recording always gives the same bytes. Datasets are gzip-compressed with h5py's built-in filter (DSEC's files use Blosc through ``hdf5plugin``; gzip
 needs no plugin on the reading side).
 """
 
@@ -27,6 +27,8 @@ import numpy as np
 from simspad.io.atomic import atomic_path
 from simspad.io.export.common import EXPORT_CHUNK_EVENTS, check_sorted, require_group
 
+#: HDF5 library version bounds (fixed, and no object times stored: the same recording gives the same bytes).
+_LIBVER = ("v110", "v110")
 #: HDF5 chunk of each event column (rows).
 _H5_CHUNK = 1 << 16
 _COLUMNS = (("p", np.uint8), ("t", np.int64), ("x", np.uint16), ("y", np.uint16))
@@ -56,9 +58,10 @@ def export_dsec(rec, out: Path, *, chunk_events: int = EXPORT_CHUNK_EVENTS) -> P
     n_ms = int(math.ceil(round(t1_s * 1e3, 6))) + 1 - t_offset_us // 1000
     boundaries_us = np.arange(n_ms, dtype=np.int64) * 1000
     ms_to_idx = np.zeros(n_ms, dtype=np.uint64)
-    with atomic_path(out) as tmp, h5py.File(tmp, "w") as h5:
+    with atomic_path(out) as tmp, h5py.File(tmp, "w", libver=_LIBVER) as h5:
         cols = {name: h5.create_dataset(f"events/{name}", shape=(0,), maxshape=(None,), dtype=dtype,
-                                        chunks=(_H5_CHUNK,), compression="gzip", compression_opts=1, shuffle=True)
+                                        chunks=(_H5_CHUNK,), compression="gzip", compression_opts=1, shuffle=True,
+                                        track_times=False)
                 for name, dtype in _COLUMNS}
         n, last_us = 0, np.iinfo(np.int64).min
         for ev in rec.events.iter_chunks(chunk_events):
@@ -73,6 +76,6 @@ def export_dsec(rec, out: Path, *, chunk_events: int = EXPORT_CHUNK_EVENTS) -> P
                 cols[name].resize((m,))
                 cols[name][n:m] = np.asarray(values, dtype=dtype)
             n, last_us = m, int(t_us[-1]) if t_us.size else last_us
-        h5.create_dataset("ms_to_idx", data=ms_to_idx)
-        h5.create_dataset("t_offset", data=np.int64(t_offset_us))
+        h5.create_dataset("ms_to_idx", data=ms_to_idx, track_times=False)
+        h5.create_dataset("t_offset", data=np.int64(t_offset_us), track_times=False)
     return out

@@ -85,7 +85,9 @@ def export_spad_frames(rec, out: Path, *, packing: str = "packed", frames_format
 
 def _npy_entry(zf: zipfile.ZipFile, name: str, dtype, shape: tuple, chunks) -> None:
     """Write one ``.npy`` member of ``shape`` into the open ZIP, from an iterable of row blocks."""
-    with zf.open(f"{name}.npy", "w", force_zip64=True) as f:
+    # A fixed entry time (the ZIP epoch), so the same recording gives the same bytes.
+    info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+    with zf.open(info, "w", force_zip64=True) as f:
         header = {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
                   "shape": tuple(int(s) for s in shape)}
         np.lib.format.write_array_header_2_0(f, header)

@@ -70,3 +70,12 @@ def test_bad_option_is_one_clear_error(full_recording, tmp_path):
     with pytest.raises(SimSpadError, match="--spad-packing.*expected one of packed, unpacked"):
         export_recording(full_recording, "npz", tmp_path / "out", packing="zip")
     assert not (tmp_path / "out").exists()
+
+
+def test_same_recording_same_bytes(full_recording, tmp_path):
+    a = export_recording(full_recording, "npz", tmp_path / "a", chunk_bins=300)
+    b = export_recording(full_recording, "npz", tmp_path / "b", chunk_bins=1000)
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
+    for f in files:
+        assert (a / f).read_bytes() == (b / f).read_bytes(), f
