@@ -21,6 +21,11 @@ def export_from_cli(recording, fmt: str, out, *, packing: str, frames_format: st
         raise SimSpadError("no such recording file", path=recording)
     if out.resolve() == recording.resolve():
         raise SimSpadError("--out would overwrite the recording being exported", path=out, field="--out")
+    if fmt == "npz" and out.exists() and not out.is_dir():
+        raise SimSpadError("npz export writes a directory, and a file of that name exists", path=out, field="--out")
+    if fmt != "npz" and out.is_dir():
+        raise SimSpadError(f"{fmt} export writes a file, and a directory of that name exists", path=out,
+                           field="--out")
     options = {"packing": packing, "frames_format": frames_format} if fmt == "npz" else {}
     path = export_recording(recording, fmt, out, **options)
     click.echo(f"wrote {path}")

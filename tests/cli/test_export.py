@@ -29,6 +29,7 @@ def test_bad_input_is_one_line_and_exit_2(simspad_cli, tmp_path):
         (("export", tmp_path / "missing.h5", "--to", "evt3", "--out", tmp_path / "a.raw"), "missing.h5"),
         (("export", rec, "--to", "npz", "--out", tmp_path / "out"), "no /spad, /frames or /gt group"),
         (("export", rec, "--to", "evt9", "--out", tmp_path / "a.raw"), "'evt9' is not one of"),
+        (("export", rec, "--to", "evt3", "--out", tmp_path), "a directory of that name exists"),
     ]
     for args, needle in cases:
         res = simspad_cli.run(*args)
