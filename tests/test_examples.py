@@ -36,3 +36,21 @@ def test_inspect_recording_runs_and_the_spad_estimate_matches_its_predicted_spre
     # The ML estimator is nearly unbiased and its scatter is the Cramér–Rao spread (the flux varies slightly
     # within the aggregate, hence the tolerance).
     assert abs(mean) < 0.05 and 0.8 < rms / predicted < 1.25
+
+
+def test_torch_dataset_example_batches_every_window_and_the_grids_sum_to_on_minus_off(tmp_path, child_env):
+    from tests.io.export.conftest import random_events, write_event_recording
+
+    rng = np.random.default_rng(8)
+    t, x, y, p = random_events(rng, 20_000, 2_000, 42_000, 40, 30)
+    rec = write_event_recording(tmp_path / "rec.h5", t, x, y, p, width=40, height=30, t_start_s=0.002,
+                                t_end_s=0.042)
+    res = subprocess.run([sys.executable, str(EXAMPLES / "torch_dataset.py"), str(rec.path), "--window-ms", "4",
+                          "--bins", "3", "--batch", "3"], capture_output=True, text=True, timeout=120, env=child_env)
+    assert res.returncode == 0, res.stderr
+    assert re.search(r": 10 windows of 4 ms in 4 batches, grids \(3, 30, 40\)", res.stdout), res.stdout
+    m = re.search(r"events (\d+), ON - OFF (-?\d+), voxel grid sum (-?[\d.]+)", res.stdout)
+    assert m, res.stdout
+    # The ten windows cover the whole span, so the counts are the file's own.
+    assert int(m.group(1)) == t.size and int(m.group(2)) == int(np.where(p == 1, 1, -1).sum())
+    assert float(m.group(3)) == pytest.approx(int(m.group(2)), abs=1e-2)

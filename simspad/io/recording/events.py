@@ -11,6 +11,7 @@ from typing import Iterator
 import numpy as np
 
 from simspad.io.recording.group import GroupView
+from simspad.io.recording.samples import EventWindows
 
 #: Events per chunk of :meth:`EventsView.iter_chunks` by default.
 CHUNK_EVENTS = 1 << 20
@@ -75,3 +76,15 @@ class EventsView(GroupView):
         i1 = self.n_events if t1_s is None else self.first_index_at(t1_s)
         for i in range(i0, i1, chunk):
             yield self.by_index(i, min(i + chunk, i1))
+
+    def windows(self, window_s: float, t0_s: float | None = None, t1_s: float | None = None) -> EventWindows:
+        """Fixed-length windows over ``[t0_s, t1_s)`` (default: the recorded span) as a lazy sequence of
+        structured arrays with signed polarity (:class:`~simspad.io.recording.samples.EventWindows`)."""
+        t0, t1 = self.span_s()
+        return EventWindows(self, window_s, t0 if t0_s is None else t0_s, t1 if t1_s is None else t1_s)
+
+    def span_s(self) -> tuple[float, float]:
+        """The recorded span ``(t_start_s, t_end_s)`` on the timestamps' time base, s."""
+        attrs = self._h5.attrs
+        t0 = float(attrs.get("t_start_s", 0.0))
+        return t0, float(attrs.get("t_end_s", t0 + float(attrs["duration_s"])))

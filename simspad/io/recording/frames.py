@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from simspad.io.recording.group import GroupView
+from simspad.io.recording.samples import Frames
 
 
 class FramesView(GroupView):
@@ -28,3 +29,7 @@ class FramesView(GroupView):
     def dn(self, index=slice(None)) -> np.ndarray:
         """Raw frames in DN (uint16), ``[H,W]`` or ``[n,H,W]``."""
         return self._dataset("dn")[index]
+
+    def items(self) -> Frames:
+        """The frames as a lazy sequence of ``(t_start_s, t_end_s, dn[H,W])``."""
+        return Frames(self)

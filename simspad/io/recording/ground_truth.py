@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from simspad.io.recording.group import GroupView
+from simspad.io.recording.samples import GroundTruth
 
 
 class GroundTruthView(GroupView):
@@ -22,6 +23,10 @@ class GroundTruthView(GroupView):
     def depth(self, index=slice(None)) -> np.ndarray | None:
         """Depth, m (``[H,W]`` or ``[n,H,W]``); None when the render had none."""
         return self._h5["gt/depth"][index] if "gt/depth" in self._h5 else None
+
+    def items(self) -> GroundTruth:
+        """The ground truth as a lazy sequence of ``(t_s, flux[H,W], depth[H,W] or None)``."""
+        return GroundTruth(self)
 
 
 class PosesView(GroupView):

@@ -7,6 +7,7 @@ from typing import Iterator
 import numpy as np
 
 from simspad.io.recording.group import GroupView
+from simspad.io.recording.samples import SpadBlocks
 
 #: Binary frames read per chunk by default (bounded memory whatever the recording length).
 CHUNK_BINS = 1024
@@ -53,3 +54,7 @@ class SpadView(GroupView):
         for _, bits in self.iter_bits(start, stop, chunk):
             total += bits.sum(axis=0, dtype=np.int32)
         return total
+
+    def blocks(self, n_bins: int) -> SpadBlocks:
+        """Consecutive blocks of ``n_bins`` binary frames as a lazy sequence of ``(t_start_s, bits[n,H,W])``."""
+        return SpadBlocks(self, n_bins)
