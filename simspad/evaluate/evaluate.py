@@ -170,17 +170,24 @@ def run_recording(tasks: list[Task]) -> list[dict]:
     return [run_task(t, cache) for t in tasks]
 
 
+#: Jobs per worker below which a recording's methods are split over several jobs (load balance).
+_JOBS_PER_WORKER = 4
+
+
 def _batches(tasks: list[Task], workers: int) -> list[list[Task]]:
     """Tasks grouped by recording (consecutive), so a worker scores one recording's methods against ground
-    truth it has read once; split into single tasks when there are fewer recordings than workers."""
+    truth it has read once; with few recordings each group is split in parts, so that the workers stay busy."""
     groups: list[list[Task]] = []
     for t in tasks:
         if groups and groups[-1][0].entry.rel == t.entry.rel:
             groups[-1].append(t)
         else:
             groups.append([t])
-    if len(groups) < workers:
-        groups = [[t] for t in tasks]
+    if workers > 1 and len(groups) < _JOBS_PER_WORKER * workers:
+        parts = -(-_JOBS_PER_WORKER * workers // len(groups))
+        # contiguous parts: the flattened results stay in task order
+        groups = [part for g in groups for part in (g[i:i + -(-len(g) // parts)]
+                                                    for i in range(0, len(g), -(-len(g) // parts)))]
     return groups
 
 
