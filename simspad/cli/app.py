@@ -21,6 +21,9 @@ from simspad.io.export import FRAME_FORMATS as EXPORT_FRAME_FORMATS
 from simspad.io.export import PACKINGS as EXPORT_PACKINGS
 
 _DEBUG = False
+#: The built-in method names for ``--help`` (not imported from the registry: `simspad --help` stays fast;
+#: tests/evaluate/test_cli_help.py checks it against the registry).
+METHOD_NAMES_HELP = "nedi_akf, adaptive_nedi_akf, akf_fe, cf, edi, ni, nedi, qbp"
 
 
 def _parse_resolution(ctx, param, value):
@@ -120,8 +123,10 @@ def generate(spec, out_dir, executor, scheduler, workers, prune):
 
 @cli.command()
 @click.argument("target", type=click.Path(path_type=Path))
-@click.option("--methods", default=None, help="Comma-separated method names (default: all that the data allows).")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Results directory.")
+@click.option("--methods", default=None, help="Comma-separated method names, from: " + METHOD_NAMES_HELP +
+              " (default: the spec's evaluation.methods, else all that the data allows).")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
+              help="Results directory (required; no default).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Evaluation rate in Hz (default: spec or 1000).")
 def evaluate(target, methods, out_dir, rate_hz):
     """Run fusion methods and baselines on a dataset or recording and score them."""
@@ -132,7 +137,8 @@ def evaluate(target, methods, out_dir, rate_hz):
 
 @cli.command()
 @click.argument("results_dirs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None, help="Output directory.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Output directory (default: the first RESULTS_DIR).")
 def leaderboard(results_dirs, out_dir):
     """Build the leaderboard (markdown, csv, html with plots) from one or more results directories."""
     from simspad.cli.leaderboard import leaderboard_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
@@ -142,8 +148,10 @@ def leaderboard(results_dirs, out_dir):
 
 @cli.command()
 @click.argument("submission", type=click.Path(path_type=Path))
-@click.option("--dataset", "dataset_dir", type=click.Path(path_type=Path), required=True)
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None, help="Results directory.")
+@click.option("--dataset", "dataset_dir", type=click.Path(path_type=Path), required=True,
+              help="Dataset directory (with manifest.json) the submission reconstructs (required).")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Results directory (default: <SUBMISSION stem>_results beside the submission).")
 def score(submission, dataset_dir, out_dir):
     """Score an external method's reconstructions (HDF5 submission) against a dataset."""
     from simspad.cli.score import score_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)

@@ -1,4 +1,4 @@
-"""``simspad evaluate``: evaluate, print a short table, exit 1 when a method run failed."""
+"""``simspad evaluate``: evaluate, print a short table and per-method timings, exit 1 when a method run failed."""
 
 from __future__ import annotations
 
@@ -23,10 +23,24 @@ def summary_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def timing_table(timings: list[dict]) -> str:
+    """Per-method timings (for the terminal): runs, seconds inside the method and in all, slowest first."""
+    lines = [f"{'method':<20} {'runs':>5} {'method s':>9} {'total s':>9} {'s/run':>7}"]
+    for t in sorted(timings, key=lambda t: -t["total_s"]):
+        lines.append(f"{t['method'][:20]:<20} {t['runs']:5d} {t['method_s']:9.1f} {t['total_s']:9.1f} "
+                     f"{t['total_s'] / max(t['runs'], 1):7.2f}")
+    return "\n".join(lines)
+
+
 def evaluate_from_cli(target, methods=None, out_dir=None, rate_hz=None) -> Path:
-    """The ``simspad evaluate`` command: evaluate, print a summary, raise EvaluationFailed if a run failed."""
-    out, rows = evaluate(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz)
+    """The ``simspad evaluate`` command: evaluate, print a summary and the per-method timings, raise
+    EvaluationFailed if a run failed."""
+    timings: list[dict] = []
+    out, rows = evaluate(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz, timings=timings)
     click.echo(summary_table(rows))
+    click.echo("")
+    click.echo("timings (method s: inside the method; total s: with scoring and writing; summed over workers)")
+    click.echo(timing_table(timings))
     click.echo(f"wrote {out / 'results.csv'}")
     failed = [r for r in rows if r.get("error")]
     if failed:

@@ -1,4 +1,4 @@
-"""``simspad evaluate``: run reconstruction methods on recordings and score them (DESIGN §8).
+"""``simspad evaluate``: run reconstruction methods on recordings and score them.
 
 For each recording × method (a *task*), following the protocol of :mod:`simspad.evaluate.protocol`:
 
@@ -9,11 +9,15 @@ For each recording × method (a *task*), following the protocol of :mod:`simspad
 3. the method reconstructs flux frames at those instants; each frame is scored as it arrives
    (:func:`simspad.evaluate.metrics.frame_scores`: display mapping, log-affine alignment for methods without
    absolute scale, PSNR, SSIM), so memory does not grow with the sequence length;
-4. Siemens-star recordings (scene name containing ``siemens``) also get the MTF (mean over frames) and MTF50;
+4. Siemens-star recordings (scene name containing ``siemens``) also get the MTF (mean over frames), its value at
+   fixed frequencies and MTF50 (:func:`simspad.evaluate.protocol.star_figures`);
 5. the method's bandwidth is read from the reconstruction once it has been iterated.
 
-Tasks run in a process pool of at most 2 workers (``spawn``); rows come out in a deterministic order
-(recordings in manifest/sorted order, methods in the requested order) whatever finishes first.
+Tasks run in a process pool of at most 2 workers (``spawn``), one recording's methods per job so that its ground
+truth is read, display-mapped and (Siemens star) analysed once for all of them
+(:class:`simspad.evaluate.protocol.GroundTruthCache`); rows come out in a deterministic order (recordings in
+manifest/sorted order, methods in the requested order) whatever finishes first. A progress bar counts method
+runs; per-method timings go to ``results.json`` and the command's output.
 
 Failure policy: a method that fails on a recording (exception, wrong frame shape, NaN/inf output) does not stop
 the run: its row is written with NaN metrics and the message in the ``error`` column, all other tasks complete and
@@ -26,21 +30,27 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
-from concurrent.futures import ProcessPoolExecutor
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+
+from tqdm import tqdm
 
 from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.evaluate import metrics
 from simspad.evaluate.protocol import (
     DEFAULT_RATE_HZ,
+    GroundTruthCache,
     ScoringRun,
     evaluation_indices,
     gt_white_point,
     protocol_metadata,
     score_frames,
+    star_figures,
 )
 from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
 from simspad.io.atomic import atomic_path
@@ -79,14 +89,25 @@ class Task:
 def _base_row(task: Task, white: float) -> dict:
     e = task.entry
     return {"method": task.method, "label": task.method, "sensors": "", "scene": e.scene, "sequence": e.sequence,
-            "lux": e.lux, "recording": e.rel, "psnr_db": float("nan"), "ssim": float("nan"),
-            "mtf50_cyc_px": float("nan"), "bandwidth_khz_per_pixel": float("nan"),
+            "lux": e.lux, "recording": e.rel, "speed_factor": e.speed_factor, "image_speed_px_s": e.image_speed_px_s,
+            "psnr_db": float("nan"), "ssim": float("nan"), **star_figures(None), "bandwidth_khz_per_pixel": float("nan"),
             "bandwidth_bits_per_pixel_s": float("nan"), "absolute_scale": True, "n_frames": 0,
             "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": ""}
 
 
-def run_task(task: Task) -> dict:
-    """Run one method on one recording and score it; never raises for a method failure (see module doc)."""
+def run_task(task: Task, gt_cache: GroundTruthCache | None = None) -> dict:
+    """Run one method on one recording and score it; never raises for a method failure (see module doc).
+
+    ``gt_cache`` (optional) shares the recording's ground truth with the other methods scored on it. The output
+    holds ``seconds``, the task's wall time (method, scoring and writing).
+    """
+    start = time.perf_counter()
+    out = _run_task(task, gt_cache)
+    out["seconds"] = time.perf_counter() - start
+    return out
+
+
+def _run_task(task: Task, gt_cache: GroundTruthCache | None) -> dict:
     e = task.entry
     with open_recording(e.path) as rec:
         idx = evaluation_indices(rec.gt.t, task.rate_hz)
@@ -109,7 +130,7 @@ def run_task(task: Task) -> dict:
                 reco = method.reconstruct(rec, times)
                 run = ScoringRun(method=task.method, recording=e.rel, scene=e.scene, white=white,
                                  absolute_scale=method.absolute_scale, image_frame=idx.size // 2)
-                res = score_frames(rec, idx, reco, run, frame_sink=sink)
+                res = score_frames(rec, idx, reco, run, frame_sink=sink, gt_cache=gt_cache)
             finally:
                 if sink is not None:
                     sink.close()
@@ -122,7 +143,7 @@ def run_task(task: Task) -> dict:
                 row["image"] = write_images(task.work_dir, e.key, task.method, res["images"])
             if res["mtf"] is not None:
                 f, m = res["mtf"]
-                row["mtf50_cyc_px"] = metrics.mtf50(f, m)
+                row.update(star_figures(res["mtf"]))
                 out["mtf_rows"] = [{"method": task.method, "recording": e.rel, "freq_cyc_px": float(a),
                                     "mtf": float(b)} for a, b in zip(f, m)]
             out["frame_rows"] = res["frame_rows"]
@@ -142,17 +163,75 @@ def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float, white:
     save_png(work_dir / "images" / slug(entry.key) / "gt.png", crop(metrics.display_map(gt, white)))
 
 
-def run_tasks(tasks: list[Task], workers: int | None = None) -> list[dict]:
-    """Run tasks (process pool of ≤ 2 workers when there is more than one task); results in task order."""
+def run_recording(tasks: list[Task]) -> list[dict]:
+    """Run tasks of one recording in order, sharing its ground truth (:class:`GroundTruthCache`)."""
+    white = tasks[0].white
+    cache = GroundTruthCache(white) if white is not None and all(t.white == white for t in tasks) else None
+    return [run_task(t, cache) for t in tasks]
+
+
+#: Jobs per worker below which a recording's methods are split over several jobs (load balance).
+_JOBS_PER_WORKER = 4
+
+
+def _batches(tasks: list[Task], workers: int) -> list[list[Task]]:
+    """Tasks grouped by recording (consecutive), so a worker scores one recording's methods against ground
+    truth it has read once; with few recordings each group is split in parts, so that the workers stay busy."""
+    groups: list[list[Task]] = []
+    for t in tasks:
+        if groups and groups[-1][0].entry.rel == t.entry.rel:
+            groups[-1].append(t)
+        else:
+            groups.append([t])
+    if workers > 1 and len(groups) < _JOBS_PER_WORKER * workers:
+        parts = -(-_JOBS_PER_WORKER * workers // len(groups))
+        # contiguous parts: the flattened results stay in task order
+        groups = [part for g in groups for part in (g[i:i + -(-len(g) // parts)]
+                                                    for i in range(0, len(g), -(-len(g) // parts)))]
+    return groups
+
+
+def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = True) -> list[dict]:
+    """Run tasks (process pool of ≤ 2 workers when there is more than one task); results in task order.
+
+    A progress bar on stderr counts method runs (recordings × methods) with an estimate of the time left.
+    """
     workers = min(MAX_WORKERS, len(tasks), workers or os.cpu_count() or 1)
-    if workers <= 1:
-        return [run_task(t) for t in tasks]
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        return list(pool.map(run_task, tasks))
+    batches = _batches(tasks, workers)
+    results: list[list[dict] | None] = [None] * len(batches)
+    with tqdm(total=len(tasks), desc="evaluate", unit="run", file=sys.stderr, dynamic_ncols=True,
+              disable=not progress) as bar:
+        def done(i: int, out: list[dict]) -> None:
+            results[i] = out
+            bar.set_postfix_str(batches[i][0].entry.key, refresh=False)
+            bar.update(len(out))
+
+        if workers <= 1:
+            for i, b in enumerate(batches):
+                done(i, run_recording(b))
+        else:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+                futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
+                for fut in as_completed(futures):
+                    done(futures[fut], fut.result())
+    return [r for out in results for r in out]
+
+
+def timing_rows(tasks: list[Task], results: list[dict]) -> list[dict]:
+    """Per method: runs, seconds inside the method, seconds in all (scoring and writing included)."""
+    table: dict[str, dict] = {}
+    for t, r in zip(tasks, results):
+        m = table.setdefault(t.method, {"method": t.method, "runs": 0, "method_s": 0.0, "total_s": 0.0})
+        m["runs"] += 1
+        rt = r["row"].get("runtime_s", float("nan"))
+        m["method_s"] += rt if rt == rt else 0.0
+        m["total_s"] += r.get("seconds", 0.0)
+    return list(table.values())
 
 
 def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
-             save_reconstructions: bool = True) -> tuple[Path, list[dict]]:
+             save_reconstructions: bool = True, progress: bool = True,
+             timings: list | None = None) -> tuple[Path, list[dict]]:
     """Evaluate ``methods`` on every recording of ``target`` and write the results directory ``out_dir``.
 
     Parameters
@@ -166,6 +245,11 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         Results directory (created atomically; an existing results directory is replaced).
     rate_hz : float, optional
         Evaluation rate; default the spec's ``evaluation.rate_hz`` or 1000 Hz.
+    progress : bool
+        Show a progress bar on stderr.
+    timings : list, optional
+        Receives one dict per method (:func:`timing_rows`: runs, ``method_s``, ``total_s``), also written to
+        ``results.json`` as ``timings``.
 
     Returns
     -------
@@ -203,8 +287,11 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         tmp.mkdir(parents=True)
         for t in tasks:
             t.work_dir = tmp
-        results = run_tasks(tasks, workers)
+        results = run_tasks(tasks, workers, progress)
         rows = [r["row"] for r in results]
+        timing = timing_rows(tasks, results)
+        if timings is not None:
+            timings.extend(timing)
         for e in entries:
             if not (tmp / "images" / slug(e.key) / "gt.png").exists():
                 write_gt_image(tmp, e, rate_hz, whites[e.rel])
@@ -213,8 +300,9 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                 "kind": "evaluate", "target": str(target), "rate_hz": rate_hz,
                 "methods": sorted({t.method for t in tasks}),
                 "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
-                                "lux": e.lux} for e in entries],
-                "protocol": protocol_metadata(),
+                                "lux": e.lux, "speed_factor": e.speed_factor,
+                                "image_speed_px_s": e.image_speed_px_s} for e in entries],
+                "protocol": protocol_metadata(), "timings": timing,
                 "dataset": {k: (manifest or {}).get(k) for k in ("spec_hash", "seed")}}
         write_results_dir(tmp, rows, [f for r in results for f in r["frame_rows"]],
                           [m for r in results for m in r["mtf_rows"]], meta)

@@ -1,4 +1,4 @@
-"""Image-quality metrics of the evaluation protocol (DESIGN §8).
+"""Image-quality metrics of the evaluation protocol (:mod:`simspad.evaluate.protocol`).
 
 Display mapping, applied identically to ground truth and reconstruction::
 
@@ -21,7 +21,10 @@ MTF (Siemens star): along circles of radius r around the star's centre the star 
 ``n_cycles`` periods, i.e. spatial frequency f = n_cycles / (2π r) cycles per pixel. On each circle h = F_n/F_0 is
 the n_cycles-th angular Fourier coefficient over the mean (half the Michelson contrast of a sinusoid);
 MTF(f) = Re(h_rec·conj(h_gt))/|h_gt|², the reconstruction's modulation relative to the ground truth's (projected
-on its phase, so noise does not masquerade as contrast). MTF50 is the lowest frequency where it falls to 0.5.
+on its phase, so noise does not masquerade as contrast). The figures reported are the MTF at the fixed
+frequencies :data:`STAR_FREQS_CYC_PX` (informative even when a method keeps more than half the contrast up to
+Nyquist, as most do on a static star) and MTF50, the lowest frequency where it falls to 0.5 (NaN when it does
+not inside the measured band).
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ WHITE_PERCENTILE = 99.0
 LOG_FLOOR_REL = 1e-3
 #: Fewest cycles a Siemens star is assumed to have (lower harmonics are the star's outline, not its spokes).
 MIN_STAR_CYCLES = 8
+#: Spatial frequencies (cycles/px) at which the Siemens-star MTF is reported: half Nyquist and 0.8 Nyquist.
+STAR_FREQS_CYC_PX = (0.25, 0.4)
 
 
 # -- display mapping -------------------------------------------------------------------------------------------
@@ -210,9 +215,11 @@ def ssim(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
     return float(structural_similarity(g, r, data_range=1.0, win_size=win))
 
 
-def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: bool) -> dict:
+def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: bool,
+                 gt_display: np.ndarray | None = None) -> dict:
     """PSNR and SSIM of one frame under the protocol (alignment first when not ``absolute_scale``).
 
+    ``gt_display`` (optional) is ``display_map(gt, white)`` when the caller keeps it for several methods.
     Returns ``{"psnr_db", "ssim", "fit_a", "fit_b"}`` (fit_* NaN for absolute-scale methods).
     """
     rec = np.asarray(rec, dtype=np.float64)
@@ -220,7 +227,8 @@ def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: 
     if not absolute_scale:
         a, b = affine_log_fit(rec, gt, white)
         rec = np.exp(a * _log_floored(rec, log_floor_rec(rec)) + b)
-    rd, gd = display_map(rec, white), display_map(gt, white)
+    rd = display_map(rec, white)
+    gd = display_map(gt, white) if gt_display is None else gt_display
     return {"psnr_db": psnr_db(rd, gd), "ssim": ssim(rd, gd), "fit_a": a, "fit_b": b}
 
 
@@ -284,8 +292,27 @@ def siemens_star_geometry(gt: np.ndarray, max_cycles: int = 128) -> tuple[float,
     return float(cy), float(cx), int(n), float(r_max)
 
 
+def _star_radii(geometry: tuple[float, float, int, float], n_radii: int) -> np.ndarray | None:
+    """The circles :func:`mtf_siemens` samples (Nyquist radius to the star's edge); None when none fits."""
+    _, _, n, r_max = geometry
+    r_min = max(n / np.pi, 2.0)  # f = n / (2π r) = 0.5 cycles/px
+    if r_max <= r_min:
+        return None
+    return np.geomspace(r_min, r_max, n_radii)
+
+
+def star_harmonics(img: np.ndarray, geometry: tuple[float, float, int, float], n_radii: int = 24) -> np.ndarray:
+    """The star's normalised harmonic F_n/F_0 on each circle of :func:`mtf_siemens` (empty when none fits)."""
+    cy, cx, n, _ = geometry
+    radii = _star_radii(geometry, n_radii)
+    if radii is None:
+        return np.empty(0, complex)
+    return np.array([_circle_harmonic(img, cy, cx, r, n) for r in radii])
+
+
 def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,
-                geometry: tuple[float, float, int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                geometry: tuple[float, float, int, float] | None = None,
+                gt_harmonics: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """MTF of a reconstruction of a Siemens star relative to its ground truth.
 
     On each circle the reconstruction's normalised harmonic is projected on the ground truth's:
@@ -300,19 +327,21 @@ def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,
         Circles sampled between the Nyquist radius (f = 0.5 cycles/px) and the star's edge.
     geometry : (cy, cx, n_cycles, r_max), optional
         From :func:`siemens_star_geometry` (computed from ``gt`` if omitted).
+    gt_harmonics : ndarray of complex, optional
+        ``star_harmonics(gt, geometry, n_radii)`` when the caller keeps it for several methods.
 
     Returns
     -------
     freq_cyc_px, mtf : ndarrays sorted by increasing frequency; NaN on circles where the ground truth shows
     less than 10 % of its strongest modulation (outside the star).
     """
-    cy, cx, n, r_max = geometry or siemens_star_geometry(gt)
-    r_min = max(n / np.pi, 2.0)  # f = n / (2π r) = 0.5 cycles/px
-    if r_max <= r_min:
+    geometry = geometry or siemens_star_geometry(gt)
+    cy, cx, n, r_max = geometry
+    radii = _star_radii(geometry, n_radii)
+    if radii is None:
         return np.empty(0), np.empty(0)
-    radii = np.geomspace(r_min, r_max, n_radii)
-    h_gt = np.array([_circle_harmonic(gt, cy, cx, r, n) for r in radii])
-    h_rec = np.array([_circle_harmonic(rec, cy, cx, r, n) for r in radii])
+    h_gt = star_harmonics(gt, geometry, n_radii) if gt_harmonics is None else gt_harmonics
+    h_rec = star_harmonics(rec, geometry, n_radii)
     keep = np.abs(h_gt) > 0.1 * np.abs(h_gt).max() if np.abs(h_gt).max() > 0 else np.zeros(radii.size, bool)
     freq = n / (2 * np.pi * radii)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -322,18 +351,35 @@ def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,
 
 
 def mtf50(freq_cyc_px: np.ndarray, mtf: np.ndarray) -> float:
-    """Lowest frequency (cycles/px) where the MTF falls to 0.5, linearly interpolated; the highest measured
-    frequency if it never does, NaN if it starts below 0.5 or there is no data."""
+    """Lowest frequency (cycles/px) where the MTF falls to 0.5, linearly interpolated.
+
+    NaN when it cannot be measured: no data, an MTF already below 0.5 at the lowest measured frequency, or one
+    that never falls to 0.5 inside the measured band (it is then only known to lie above the highest measured
+    frequency, usually Nyquist; :func:`mtf_at` still tells methods apart there).
+    """
     ok = np.isfinite(mtf)
     f, m = np.asarray(freq_cyc_px)[ok], np.asarray(mtf)[ok]
     if f.size == 0 or m[0] < 0.5:
         return float("nan")
     below = np.nonzero(m < 0.5)[0]
     if below.size == 0:
-        return float(f[-1])
+        return float("nan")
     i = int(below[0])
     f0, f1, m0, m1 = f[i - 1], f[i], m[i - 1], m[i]
     return float(f0 + (m0 - 0.5) * (f1 - f0) / (m0 - m1))
+
+
+def mtf_at(freq_cyc_px: np.ndarray, mtf: np.ndarray, f_cyc_px: float) -> float:
+    """The MTF at the spatial frequency ``f_cyc_px`` (cycles/px), linearly interpolated between measured circles.
+
+    NaN when ``f_cyc_px`` lies outside the measured band: a star of ``n`` cycles fitting a radius ``r_max`` is
+    measured only from ``n / (2π r_max)`` up to Nyquist, so low frequencies cannot be measured on small images.
+    """
+    ok = np.isfinite(mtf)
+    f, m = np.asarray(freq_cyc_px, np.float64)[ok], np.asarray(mtf, np.float64)[ok]
+    if f.size == 0 or not (f[0] <= f_cyc_px <= f[-1]):
+        return float("nan")
+    return float(np.interp(f_cyc_px, f, m))
 
 
 def iter_chunks(read: Callable[[slice], np.ndarray], n: int, chunk: int = 16) -> Callable[[], Iterator[np.ndarray]]:

@@ -1,4 +1,4 @@
-"""The evaluation protocol (DESIGN §8), shared by ``simspad evaluate`` and ``simspad score``.
+"""The evaluation protocol, shared by ``simspad evaluate`` and ``simspad score``.
 
 1. The evaluation instants are the ``/gt/t`` instants that lie on the evaluation grid t₀ + k/rate_hz
    (default 1 kHz, or the dataset spec's ``evaluation.rate_hz``): :func:`evaluation_indices`.
@@ -7,7 +7,8 @@
 3. Each reconstructed frame is scored as it arrives (:func:`simspad.evaluate.metrics.frame_scores`: display
    mapping, log-affine alignment for methods without absolute scale, PSNR, SSIM), so memory does not grow with
    the sequence length: :func:`score_frames`.
-4. Siemens-star recordings (scene name containing ``siemens``) also get the MTF (mean over frames) and MTF50.
+4. Siemens-star recordings (scene name containing ``siemens``) also get the MTF (mean over frames), reported by
+   :func:`star_figures` as its value at the fixed frequencies ``metrics.STAR_FREQS_CYC_PX`` and MTF50.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ DEFAULT_RATE_HZ = defaults.GT_RATE_HZ
 GRID_TOLERANCE = 1e-6
 #: Ground-truth frames read at a time for the white point.
 _WHITE_CHUNK_FRAMES = 16
+#: Most bytes of ground-truth frames (and what is derived from them) kept per recording for its methods.
+GT_CACHE_BYTES = 256 * 2**20
 
 
 def evaluation_indices(gt_t: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -102,6 +105,50 @@ def _checked_frame(img, i: int, n: int, shape: tuple[int, int]) -> np.ndarray:
     return img
 
 
+class GroundTruthCache:
+    """What scoring derives from a recording's ground truth, computed once for all the methods scored on it.
+
+    Holds, per evaluation instant, the ground-truth frame, its display mapping and (Siemens star) its angular
+    harmonics, and the star's geometry, up to ``max_bytes`` of frames: past that, frames are computed again for
+    each method, so memory does not grow with the sequence length. Scores are identical with or without it.
+    """
+
+    def __init__(self, white: float, max_bytes: int = GT_CACHE_BYTES):
+        self.white = white
+        self.max_bytes = int(max_bytes)
+        self._bytes = 0
+        self._frames: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._harmonics: dict[int, np.ndarray] = {}
+        self.geometry = None
+
+    def frame(self, rec, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(ground truth, its display mapping) at ground-truth index ``index``."""
+        hit = self._frames.get(index)
+        if hit is not None:
+            return hit
+        gt = np.asarray(rec.gt.flux(index))
+        pair = (gt, metrics.display_map(gt, self.white))
+        for a in pair:
+            a.flags.writeable = False  # shared by every method scored on this recording
+        size = gt.nbytes + pair[1].nbytes
+        if self._bytes + size <= self.max_bytes:
+            self._frames[index] = pair
+            self._bytes += size
+        return pair
+
+    def star(self, index: int, gt: np.ndarray) -> tuple[tuple, np.ndarray]:
+        """(star geometry, ground-truth harmonics) at ``index``; the geometry from the first frame asked for."""
+        if self.geometry is None:
+            self.geometry = metrics.siemens_star_geometry(gt)
+        h = self._harmonics.get(index)
+        if h is None:
+            h = metrics.star_harmonics(gt, self.geometry)
+            if self._bytes + h.nbytes <= self.max_bytes:
+                self._harmonics[index] = h
+                self._bytes += h.nbytes
+        return self.geometry, h
+
+
 @dataclass(frozen=True)
 class ScoringRun:
     """How one method's frames on one recording are scored, and the labels of its per-frame rows.
@@ -130,7 +177,8 @@ class ScoringRun:
     image_frame: int
 
 
-def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None):
+def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None,
+                 gt_cache: GroundTruthCache | None = None):
     """Score a stream of reconstructed frames against the recording's ground truth at ``idx``.
 
     Parameters
@@ -144,6 +192,9 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None)
         White point, scale, labels and the frame whose crops are returned.
     frame_sink : callable(i, frame), optional
         Receives each frame (to save the reconstructions).
+    gt_cache : GroundTruthCache, optional
+        Ground truth shared with the other methods scored on this recording (same white point); the scores are
+        identical without it.
 
     Returns
     -------
@@ -156,7 +207,8 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None)
     t = rec.gt.t
     frame_rows, psnrs, ssims = [], [], []
     star = is_siemens_star(run.scene)
-    geometry = None
+    if gt_cache is None or gt_cache.white != white:
+        gt_cache = GroundTruthCache(white, max_bytes=0)  # nothing kept: each frame computed once, here
     mtf = _MeanMtf()
     images = None
     method_s = 0.0
@@ -173,8 +225,8 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None)
         img = _checked_frame(img, i, idx.size, (H, W))
         if frame_sink is not None:
             frame_sink(i, img)
-        gt = rec.gt.flux(int(idx[i]))
-        s = metrics.frame_scores(img, gt, white, absolute_scale)
+        gt, gt_display = gt_cache.frame(rec, int(idx[i]))
+        s = metrics.frame_scores(img, gt, white, absolute_scale, gt_display=gt_display)
         frame_rows.append({"method": run.method, "recording": run.recording, "frame": i, "t_s": float(t[idx[i]]),
                            **s})
         psnrs.append(s["psnr_db"])
@@ -182,17 +234,37 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None)
         if star or i == image_frame:
             shown = img if absolute_scale else metrics.align_log_affine(img, gt, white)
         if star:
-            if geometry is None:
-                geometry = metrics.siemens_star_geometry(gt)
-            mtf.add(*metrics.mtf_siemens(shown, gt, geometry=geometry))
+            geometry, h_gt = gt_cache.star(int(idx[i]), gt)
+            mtf.add(*metrics.mtf_siemens(shown, gt, geometry=geometry, gt_harmonics=h_gt))
         if i == image_frame:
-            images = (crop(metrics.display_map(shown, white)), crop(metrics.display_map(gt, white)))
+            images = (crop(metrics.display_map(shown, white)), crop(gt_display))
         i += 1
     if i != idx.size:
         raise ValueError(f"{i} frames for {idx.size} evaluation instants")
     return {"frame_rows": frame_rows, "psnr_db": float(np.mean(psnrs)) if psnrs else float("nan"),
             "ssim": float(np.nanmean(ssims)) if ssims and not np.all(np.isnan(ssims)) else float("nan"),
             "n_frames": i, "mtf": mtf.result(), "images": images, "method_s": method_s}
+
+
+def star_column(f_cyc_px: float) -> str:
+    """The results.csv column of the MTF at ``f_cyc_px``: ``mtf_at_0p25_cyc_px`` for 0.25 cycles/px."""
+    return f"mtf_at_{f_cyc_px:.2f}_cyc_px".replace(".", "p")
+
+
+def star_figures(mtf: tuple[np.ndarray, np.ndarray] | None) -> dict:
+    """The Siemens-star columns of a results row from a mean MTF curve (freq, mtf); all NaN for None.
+
+    ``mtf_at_*_cyc_px`` is NaN where the frequency lies outside the band the star measures at this resolution,
+    ``mtf50_cyc_px`` where the MTF does not cross 0.5 inside it (see :func:`metrics.mtf50`).
+    """
+    if mtf is None:
+        out = {star_column(f): float("nan") for f in metrics.STAR_FREQS_CYC_PX}
+        out["mtf50_cyc_px"] = float("nan")
+        return out
+    f, m = mtf
+    out = {star_column(f0): metrics.mtf_at(f, m, f0) for f0 in metrics.STAR_FREQS_CYC_PX}
+    out["mtf50_cyc_px"] = metrics.mtf50(f, m)
+    return out
 
 
 def protocol_metadata() -> dict:

@@ -30,6 +30,10 @@ class RecordingEntry:
     lux: float = float("nan")
     key: str = ""
     extra: dict = field(default_factory=dict)
+    speed_factor: float = 1.0
+    """The recording's ``speed_factor`` root attribute (1 for recordings made before the speed axis)."""
+    image_speed_px_s: float = float("nan")
+    """The recording's ``image_speed_px_s_p50`` root attribute: median image motion (px/s); NaN when absent."""
 
 
 def read_manifest(dataset_dir: Path) -> dict | None:
@@ -87,8 +91,19 @@ def _found_entries(target: Path) -> list[RecordingEntry]:
     return entries
 
 
+def _attr_float(attrs, name: str, default: float, path: Path) -> float:
+    """A numeric root attribute, ``default`` when absent; SimSpadError naming it when it is not a number."""
+    if name not in attrs:
+        return default
+    try:
+        return float(attrs[name])
+    except (TypeError, ValueError):
+        raise SimSpadError(f"expected a number, got {attrs[name]!r}", path=path, field=f"/ (attribute {name})") \
+            from None
+
+
 def fill_entry(entry: RecordingEntry) -> RecordingEntry:
-    """Read sequence, scene and lux from the recording's attributes (validating the file)."""
+    """Read sequence, scene, lux and the speed attributes from the recording's attributes (validating the file)."""
     with open_recording(entry.path) as rec:
         if not rec.has("gt"):
             raise SimSpadError("recording has no ground truth (/gt): nothing to score against", path=entry.path,
@@ -97,6 +112,8 @@ def fill_entry(entry: RecordingEntry) -> RecordingEntry:
                              or Path(entry.rel).stem)
         entry.scene = str(rec.scene or entry.extra.get("scene") or entry.sequence)
         entry.lux = float(rec.lux)
+        entry.speed_factor = _attr_float(rec.attrs, "speed_factor", 1.0, entry.path)
+        entry.image_speed_px_s = _attr_float(rec.attrs, "image_speed_px_s_p50", float("nan"), entry.path)
     entry.key = recording_key(entry.sequence, entry.lux)
     return entry
 

@@ -17,7 +17,6 @@ import numpy as np
 
 from simspad import __version__
 from simspad.errors import InputError
-from simspad.evaluate import metrics
 from simspad.evaluate.protocol import (
     DEFAULT_RATE_HZ,
     ScoringRun,
@@ -25,6 +24,7 @@ from simspad.evaluate.protocol import (
     gt_white_point,
     protocol_metadata,
     score_frames,
+    star_figures,
 )
 from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
 from simspad.io.atomic import atomic_path
@@ -116,13 +116,14 @@ def score(submission, dataset_dir, out_dir=None, rate_hz=None) -> tuple[Path, li
                     res = score_frames(rec, idx, (ds[i] for i in range(ds.shape[0])), run)
                 row = {"method": attrs["method"], "label": attrs["label"], "sensors": attrs["sensors"],
                        "scene": e.scene, "sequence": e.sequence, "lux": e.lux, "recording": e.rel,
-                       "psnr_db": res["psnr_db"], "ssim": res["ssim"], "mtf50_cyc_px": float("nan"),
+                       "speed_factor": e.speed_factor, "image_speed_px_s": e.image_speed_px_s,
+                       "psnr_db": res["psnr_db"], "ssim": res["ssim"], **star_figures(None),
                        "bandwidth_khz_per_pixel": attrs["bandwidth_khz_per_pixel"],
                        "bandwidth_bits_per_pixel_s": attrs["bandwidth_bits_per_pixel_s"],
                        "absolute_scale": attrs["absolute_scale"], "n_frames": res["n_frames"],
                        "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": ""}
                 if res["mtf"] is not None:
-                    row["mtf50_cyc_px"] = metrics.mtf50(*res["mtf"])
+                    row.update(star_figures(res["mtf"]))
                     mtf_rows.extend({"method": attrs["method"], "recording": e.rel, "freq_cyc_px": float(a),
                                      "mtf": float(b)} for a, b in zip(*res["mtf"]))
                 if res["images"] is not None:

@@ -29,7 +29,8 @@ from simspad.errors import InputError, SimSpadError
 from simspad.io.atomic import check_output_path
 from simspad.io.safe_paths import confined_path
 
-RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "psnr_db", "ssim",
+RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "speed_factor",
+                  "image_speed_px_s", "psnr_db", "ssim", "mtf_at_0p25_cyc_px", "mtf_at_0p40_cyc_px",
                   "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
                   "n_frames", "runtime_s", "white_point_ph_s_m2", "image", "error")
 FRAME_COLUMNS = ("method", "recording", "frame", "t_s", "psnr_db", "ssim", "fit_a", "fit_b")

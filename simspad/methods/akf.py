@@ -330,6 +330,8 @@ class NediAkf(Method):
 
     name = "nedi_akf"
     label = "NEDI+AKF (S+E)"
+    full_name = "Nonlinear event double integral of SPAD aggregates, fused with events by an asynchronous Kalman filter"
+    citation = "NEDI: the SPAD + events fusion paper SimSPAD reproduces (README); AKF: Wang et al., ICCV 2021"
     sensors = "S+E"
     requires = ("spad", "events")
     absolute_scale = True
@@ -355,6 +357,8 @@ class AkfFrames(Method):
 
     name = "akf_fe"
     label = "AKF (F+E)"
+    full_name = "Asynchronous Kalman filter fusing EDI-deblurred conventional frames with events"
+    citation = "Wang, Ng, Scheerlinck, Mahony, ICCV 2021"
     sensors = "F+E"
     requires = ("frames", "events")
     absolute_scale = True

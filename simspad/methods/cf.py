@@ -38,6 +38,8 @@ class CF(Method):
 
     name = "cf"
     label = "CF (E)"
+    full_name = "Complementary filter on events alone, starting from no image"
+    citation = "Scheerlinck, Barnes, Mahony, ACCV 2018"
     sensors = "E"
     requires = ("events",)
     absolute_scale = False

@@ -97,6 +97,8 @@ class EDI(Method):
 
     name = "edi"
     label = "EDI (F+E)"
+    full_name = "Event double integral: conventional frames deblurred by events"
+    citation = "Pan et al., CVPR 2019"
     sensors = "F+E"
     requires = ("frames", "events")
     absolute_scale = True

@@ -119,6 +119,10 @@ class Method(abc.ABC):
         Recording groups needed (``"spad"``, ``"frames"``, ``"events"``).
     absolute_scale : bool
         Whether the output is in absolute photon irradiance (False: scored after an affine log fit).
+    full_name : str
+        What the abbreviation stands for, for the leaderboard's glossary.
+    citation : str
+        Where the method comes from (authors, venue, year), for the leaderboard's glossary.
     """
 
     name: str = ""
@@ -126,6 +130,8 @@ class Method(abc.ABC):
     sensors: str = ""
     requires: tuple[str, ...] = ()
     absolute_scale: bool = True
+    full_name: str = ""
+    citation: str = ""
 
     def reconstruct(self, rec, times_s) -> Reconstruction:
         """Reconstruct flux frames at ``times_s`` (seconds, non-decreasing) from recording ``rec``."""

@@ -16,6 +16,8 @@ class NI(NEDI):
 
     name = "ni"
     label = "NI (S)"
+    full_name = "Naive integration: the maximum-likelihood irradiance of each SPAD aggregate, no deblurring"
+    citation = "baseline of the SPAD + events fusion paper SimSPAD reproduces (README)"
     sensors = "S"
     requires = ("spad",)
     use_events = False

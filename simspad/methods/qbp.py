@@ -23,6 +23,7 @@ Bandwidth: raw binary frames, 1 bit per bin at 1/bin_s (the paper's QBP @100 kHz
 
 from __future__ import annotations
 
+import functools
 from collections import OrderedDict
 from typing import NamedTuple
 
@@ -140,17 +141,31 @@ def _tile_grid(shape, tile):
     return (shape[0] + tile - 1) // tile, (shape[1] + tile - 1) // tile
 
 
+@functools.lru_cache(maxsize=8)
+def _pixel_grid(shape: tuple[int, int]) -> np.ndarray:
+    """``np.mgrid`` of an image shape as float64 [2, H, W], read-only (shared by every call on that shape)."""
+    g = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    g.flags.writeable = False
+    return g
+
+
+@functools.lru_cache(maxsize=8)
+def _tile_coordinates(shape: tuple[int, int], tile: int) -> np.ndarray:
+    """Every pixel's position in units of tiles, relative to the first tile's centre [2, H, W], read-only."""
+    yy, xx = _pixel_grid(shape)
+    uv = np.stack([(yy - (tile - 1) / 2.0) / tile, (xx - (tile - 1) / 2.0) / tile])
+    uv.flags.writeable = False
+    return uv
+
+
 def dense_flow(tile_flow: np.ndarray, shape: tuple[int, int], tile: int) -> np.ndarray:
     """Bilinear interpolation of a per-tile flow [ny, nx] (at tile centres) to every pixel [H, W]."""
-    yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
-    u = (yy - (tile - 1) / 2.0) / tile
-    v = (xx - (tile - 1) / 2.0) / tile
-    return ndimage.map_coordinates(tile_flow, [u, v], order=1, mode="nearest")
+    return ndimage.map_coordinates(tile_flow, _tile_coordinates(tuple(shape), tile), order=1, mode="nearest")
 
 
 def warp(img: np.ndarray, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
     """``img(p + f(p))`` by bilinear interpolation, edges clamped."""
-    yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]].astype(np.float64)
+    yy, xx = _pixel_grid(img.shape)
     return ndimage.map_coordinates(img, [yy + fy, xx + fx], order=1, mode="nearest")
 
 
@@ -166,8 +181,27 @@ def _tile_sum(a: np.ndarray, tile: int, grid) -> np.ndarray:
     return pad.reshape(ny, tile, nx, tile).sum(axis=(1, 3))
 
 
+class BlockPyramid(NamedTuple):
+    """A block's Gaussian-smoothed sums and their 2× pyramid (finest first): what alignment needs of a block,
+    computed once per block however many bursts it takes part in."""
+
+    levels: list
+    """[smoothed block, its 2× downsample, …] down to a side below 32 px."""
+    gradient: tuple | None
+    """``np.gradient`` of the finest level (needed of the reference only; None until asked for)."""
+
+
+def block_pyramid(block: np.ndarray, smooth_px: float = 1.0, with_gradient: bool = False) -> BlockPyramid:
+    """The :class:`BlockPyramid` of a block of counts (smoothing σ ``smooth_px``)."""
+    levels = [ndimage.gaussian_filter(np.asarray(block, np.float64), smooth_px)]
+    while min(levels[-1].shape) >= 32:
+        levels.append(_downsample(levels[-1]))
+    return BlockPyramid(levels, tuple(np.gradient(levels[0])) if with_gradient else None)
+
+
 def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smooth_px: float = 1.0,
-                        lk_iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+                        lk_iterations: int = 3, ref_pyramid: BlockPyramid | None = None,
+                        img_pyramid: BlockPyramid | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-tile flow (dy, dx) [ny, nx] such that ``img(p + d) ≈ ref(p)`` (hierarchical, sub-pixel).
 
     Parameters
@@ -180,12 +214,16 @@ def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smo
         Gaussian pre-smoothing σ against photon noise.
     lk_iterations : int
         Lucas–Kanade refinement iterations per tile at full resolution.
+    ref_pyramid, img_pyramid : BlockPyramid, optional
+        :func:`block_pyramid` of ``ref`` (with its gradient) and ``img`` with the same ``smooth_px``, when the
+        caller keeps them across bursts (the result is identical).
     """
-    r = ndimage.gaussian_filter(np.asarray(ref, np.float64), smooth_px)
-    m = ndimage.gaussian_filter(np.asarray(img, np.float64), smooth_px)
-    pyr = [(r, m)]
-    while min(pyr[-1][0].shape) >= 32:
-        pyr.append((_downsample(pyr[-1][0]), _downsample(pyr[-1][1])))
+    if ref_pyramid is None or ref_pyramid.gradient is None:
+        ref_pyramid = block_pyramid(ref, smooth_px, with_gradient=True)
+    if img_pyramid is None:
+        img_pyramid = block_pyramid(img, smooth_px)
+    pyr = list(zip(ref_pyramid.levels, img_pyramid.levels))
+    r, m = pyr[0]
     flow_y = flow_x = None
     prev_tile = None
     for level in range(len(pyr) - 1, -1, -1):
@@ -213,12 +251,12 @@ def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smo
         prev_tile = tile
     tile = tile_px
     grid = flow_y.shape
-    gy_r, gx_r = np.gradient(r)
+    gy_r, gx_r = ref_pyramid.gradient
     for _ in range(lk_iterations):
         # Piecewise-constant flow while refining, so that each tile's Lucas–Kanade step is its own.
         fy, fx = _tile_expand(flow_y, r.shape, tile), _tile_expand(flow_x, r.shape, tile)
         w = warp(m, fy, fx)
-        yy, xx = np.mgrid[0:r.shape[0], 0:r.shape[1]]
+        yy, xx = _pixel_grid(r.shape)  # float copies of the integer grid: the same sums and comparisons
         # Pixels whose sample falls outside the image (clamped values) carry no information.
         inside = ((yy + fy >= 0) & (yy + fy <= r.shape[0] - 1) & (xx + fx >= 0) & (xx + fx <= r.shape[1] - 1))
         gw = np.gradient(w)
@@ -271,15 +309,21 @@ def remove_hot_pixels(counts: np.ndarray, hot: np.ndarray) -> np.ndarray:
     return np.where(hot, med, counts)
 
 
-def qbp_merge(blocks: list[np.ndarray], ref_index: int, block_bins: int, tile_px: int = 16):
-    """Align every block to ``blocks[ref_index]`` and merge: returns (merged counts [H,W], flows list)."""
+def qbp_merge(blocks: list[np.ndarray], ref_index: int, block_bins: int, tile_px: int = 16,
+              pyramids: list[BlockPyramid] | None = None):
+    """Align every block to ``blocks[ref_index]`` and merge: returns (merged counts [H,W], flows list).
+
+    ``pyramids`` (optional): each block's :func:`block_pyramid` (the reference's with its gradient), kept by the
+    caller across overlapping bursts; the result is identical without them.
+    """
     ref = blocks[ref_index].astype(np.float64)
     warped, flows = [], []
     for k, b in enumerate(blocks):
         if k == ref_index:
             flows.append((np.zeros(1), np.zeros(1)))
             continue
-        fy_t, fx_t = estimate_block_flow(ref, b, tile_px)
+        fy_t, fx_t = estimate_block_flow(ref, b, tile_px, ref_pyramid=pyramids[ref_index] if pyramids else None,
+                                         img_pyramid=pyramids[k] if pyramids else None)
         flows.append((fy_t, fx_t))
         warped.append(warp(b.astype(np.float64), dense_flow(fy_t, ref.shape, tile_px),
                            dense_flow(fx_t, ref.shape, tile_px)))
@@ -291,6 +335,8 @@ class QBP(Method):
 
     name = "qbp"
     label = "QBP (S)"
+    full_name = "Quanta burst photography: aligned and merged bursts of SPAD binary frames"
+    citation = "Ma et al., SIGGRAPH 2020"
     sensors = "S"
     requires = ("spad",)
     absolute_scale = True
@@ -313,6 +359,7 @@ class QBP(Method):
         dcr = np.where(hot, np.median(resp.dcr_cps[~hot]) if (~hot).any() else 0.0, resp.dcr_cps)
         centres = t_start[np.arange(nb_total) * self.block_bins + self.block_bins // 2]
         cache: OrderedDict[int, np.ndarray] = OrderedDict()
+        pyramids: dict[int, BlockPyramid] = {}  # each cached block's smoothed pyramid, for as long as it is cached
         read = set()
         nb = min(self.n_blocks, nb_total)
         for t in times_s:
@@ -327,8 +374,14 @@ class QBP(Method):
                     read.add(j)
                 blocks.append(cache[j])
             while len(cache) > 2 * nb:
-                cache.popitem(last=False)
-            merged, _ = qbp_merge(blocks, c - first, self.block_bins, self.tile_px)
+                pyramids.pop(cache.popitem(last=False)[0], None)
+            ref_j = idx[c - first]
+            if ref_j not in pyramids or pyramids[ref_j].gradient is None:
+                pyramids[ref_j] = block_pyramid(cache[ref_j], with_gradient=True)
+            for j in idx:
+                if j not in pyramids:
+                    pyramids[j] = block_pyramid(cache[j])
+            merged, _ = qbp_merge(blocks, c - first, self.block_bins, self.tile_px, [pyramids[j] for j in idx])
             n = nb * self.block_bins
             yield estimate_flux(np.clip(merged, 0, n), n, resp.q_m2, resp.gate_s, dcr).astype(np.float32)
         if read:

@@ -88,7 +88,7 @@ def test_leaderboard_escapes_user_text_and_is_self_contained(evaluated, tmp_path
     assert "<script" not in md and "†" in md
     evil_line = next(line for line in md.splitlines() if "alert" in line)
     assert "†" in evil_line and "**100.00**" not in evil_line  # the power law aligns away, the 1-px shift does not
-    ni_line = next(line for line in md.splitlines() if line.startswith("| NI (S)"))
+    ni_line = next(line for line in md.splitlines() if "| NI (S) | S |" in line)
     assert "**0.4**" in ni_line  # lowest bandwidth marked best
     csv = (out / "leaderboard.csv").read_text().splitlines()
     assert csv[0].startswith("method,label,sensors,absolute_scale") and len(csv) == 3

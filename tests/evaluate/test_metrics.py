@@ -102,3 +102,19 @@ def test_mtf_of_a_gaussian_blur_matches_the_analytic_mtf50():
     assert metrics.mtf50(f, m) == pytest.approx(expected, rel=0.05)
     sharper = metrics.mtf50(*metrics.mtf_siemens(gaussian_filter(gt, 0.8), gt, geometry=(cy, cx, n, r_max)))
     assert sharper > metrics.mtf50(f, m)
+
+
+def test_mtf_at_fixed_frequencies_matches_the_gaussian_mtf_and_says_where_it_cannot_measure():
+    gt = _star(shift=(2, -3))
+    geometry = metrics.siemens_star_geometry(gt)
+    sigma = 0.7
+    f, m = metrics.mtf_siemens(gaussian_filter(gt, sigma), gt, geometry=geometry)
+    for f0 in metrics.STAR_FREQS_CYC_PX:
+        assert metrics.mtf_at(f, m, f0) == pytest.approx(np.exp(-2 * np.pi ** 2 * sigma ** 2 * f0 ** 2), abs=0.04)
+    # An unblurred reconstruction keeps full contrast up to Nyquist: MTF50 is not measurable (NaN, not 0.5)
+    # while the fixed-frequency figures still read 1.
+    f, m = metrics.mtf_siemens(gt, gt, geometry=geometry)
+    assert np.isnan(metrics.mtf50(f, m))
+    assert metrics.mtf_at(f, m, 0.25) == pytest.approx(1.0, abs=1e-9)
+    # Below the lowest frequency the star's outer circle carries (n / 2π r_max), the figure is not invented.
+    assert np.isnan(metrics.mtf_at(f, m, 0.5 * f.min()))

@@ -1,16 +1,22 @@
 """The leaderboard's model: the merged results of one or more results directories (:class:`Board`).
 
-When two directories score the same method on the same recording, the later one wins. Methods are ranked by
-mean PSNR over all recordings (highest first); per cell (method, scene, lux) the PSNR is the mean over the
-recordings of that scene and light level. Methods scored without absolute scale (after the log-affine alignment
-of DESIGN §8) are labelled with a dagger.
+When two directories score the same method on the same recording, the later one wins. Methods scored on every
+recording of the board are ranked by mean PSNR over all recordings (highest first); methods that cover only part
+of it (a submission of a few recordings, failed runs) are listed after them, flagged, and never marked best: a
+mean over an easier subset is not comparable. Per cell (method, scene, lux) the PSNR is the mean over the
+recordings of that scene and light level. Methods scored without absolute scale (after the per-frame log-affine
+alignment of :mod:`simspad.evaluate.metrics`) are labelled with a dagger.
+
+Recordings without the speed attributes (datasets made before the speed axis) count as speed factor 1 with an
+unknown image speed (NaN).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +28,6 @@ DAGGER = "†"
 
 
 @dataclass
-
-
 class Board:
     """The merged results: rows, methods (in ranking order), (scene, lux) columns and per-method info."""
 
@@ -34,6 +38,23 @@ class Board:
     psnr: dict[tuple[str, str, float], float]
     sources: dict[tuple[str, str], Path]
     mtf50: dict[tuple[str, str, float], float]
+    recordings: list[str] = field(default_factory=list)
+    """Every recording any method was scored on, or that a scored submission left out."""
+    star: dict[tuple[str, str, float], dict[str, float]] = field(default_factory=dict)
+    """Siemens-star figures (``mtf*_cyc_px`` columns of results.csv) per (method, scene, lux); the scene name
+    carries ``×k`` for a speed factor k other than 1."""
+
+    def coverage(self, method: str) -> int:
+        """How many recordings of the board ``method`` was scored on (failed runs not counted)."""
+        return len(self.info[method]["recordings"])
+
+    def is_partial(self, method: str) -> bool:
+        """Whether ``method`` covers only part of the board's recordings."""
+        return self.coverage(method) < len(self.recordings)
+
+    def ranked(self) -> list[str]:
+        """The methods that cover every recording (the ones ranked and eligible for "best")."""
+        return [m for m in self.methods if not self.is_partial(m)]
 
 
 def load_results(results_dirs) -> list[tuple[dict, Path]]:
@@ -58,6 +79,31 @@ def load_results(results_dirs) -> list[tuple[dict, Path]]:
     return list(merged.values())
 
 
+def _float(v, default: float) -> float:
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else default
+
+
+def normalise_speed(row: dict) -> dict:
+    """Fill ``speed_factor`` (1 when absent) and ``image_speed_px_s`` (NaN when absent) of a results row."""
+    row["speed_factor"] = _float(row.get("speed_factor"), 1.0)
+    row["image_speed_px_s"] = _float(row.get("image_speed_px_s"), float("nan"))
+    return row
+
+
+def missing_recordings(results_dirs) -> set[str]:
+    """Recordings a scored submission left out (``missing_recordings`` of its ``results.json``)."""
+    out: set[str] = set()
+    for d in results_dirs:
+        try:
+            meta = json.loads((Path(d) / "results.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        miss = meta.get("missing_recordings") if isinstance(meta, dict) else None
+        if isinstance(miss, list):
+            out.update(str(m) for m in miss)
+    return out
+
+
 def mean_finite(values) -> float:
     v = [x for x in values if isinstance(x, float) and math.isfinite(x)]
     return float(np.mean(v)) if v else float("nan")
@@ -66,7 +112,7 @@ def mean_finite(values) -> float:
 def build_board(results_dirs) -> Board:
     """Merge the ``results.csv`` of ``results_dirs`` (later ones override) into a :class:`Board`."""
     loaded = load_results(results_dirs)
-    rows = [r for r, _ in loaded]
+    rows = [normalise_speed(r) for r, _ in loaded]
     sources = {(r["method"], r["recording"]): d for r, d in loaded}
     info: dict[str, dict] = {}
     per_cell: dict[tuple[str, str, float], list[float]] = defaultdict(list)
@@ -74,10 +120,12 @@ def build_board(results_dirs) -> Board:
         m = info.setdefault(r["method"], {"label": r.get("label") or r["method"], "sensors": r.get("sensors", ""),
                                           "absolute_scale": r.get("absolute_scale", True), "bw_khz": [],
                                           "bw_bits": [], "psnr": [], "ssim": [], "errors": [],
-                                          "bw_khz_by_lux": defaultdict(list), "bw_bits_by_lux": defaultdict(list)})
+                                          "bw_khz_by_lux": defaultdict(list), "bw_bits_by_lux": defaultdict(list),
+                                          "recordings": set()})
         if r.get("error"):
             m["errors"].append(r["error"])
             continue
+        m["recordings"].add(r["recording"])
         per_cell[(r["method"], r["scene"], float(r["lux"]))].append(r["psnr_db"])
         m["bw_khz"].append(r.get("bandwidth_khz_per_pixel", float("nan")))
         m["bw_bits"].append(r.get("bandwidth_bits_per_pixel_s", float("nan")))
@@ -88,15 +136,24 @@ def build_board(results_dirs) -> Board:
     psnr = {k: mean_finite(v) for k, v in per_cell.items()}
     mtf = {(r["method"], r["scene"], float(r["lux"])): r.get("mtf50_cyc_px", float("nan")) for r in rows
            if not r.get("error") and math.isfinite(r.get("mtf50_cyc_px", float("nan")))}
+    star = {}
+    for r in rows:
+        figures = {k: v for k, v in r.items() if k.startswith("mtf") and k.endswith("_cyc_px")
+                   and isinstance(v, float) and math.isfinite(v)}
+        if figures and not r.get("error"):
+            scene = r["scene"] if r["speed_factor"] == 1.0 else f"{r['scene']} ×{r['speed_factor']:g}"
+            star[(r["method"], scene, float(r["lux"]))] = figures
     columns = sorted({(r["scene"], float(r["lux"])) for r in rows})
     for m in info.values():
         m["bw_khz_mean"] = mean_finite(m["bw_khz"])
         m["bw_bits_mean"] = mean_finite(m["bw_bits"])
         m["psnr_mean"] = mean_finite(m["psnr"])
         m["ssim_mean"] = mean_finite(m["ssim"])
-    methods = sorted(info, key=lambda k: (-(info[k]["psnr_mean"]) if math.isfinite(info[k]["psnr_mean"])
+    recordings = sorted({r["recording"] for r in rows} | missing_recordings(results_dirs))
+    methods = sorted(info, key=lambda k: (len(info[k]["recordings"]) < len(recordings),
+                                          -(info[k]["psnr_mean"]) if math.isfinite(info[k]["psnr_mean"])
                                           else math.inf, k))
-    return Board(rows, methods, columns, info, psnr, sources, mtf)
+    return Board(rows, methods, columns, info, psnr, sources, mtf, recordings, star)
 
 
 def best_of(values: dict[str, float], higher: bool = True) -> set[str]:
@@ -108,8 +165,18 @@ def best_of(values: dict[str, float], higher: bool = True) -> set[str]:
 
 
 def method_label(board: Board, method: str) -> str:
+    """The display label: dagger for methods without absolute scale, ``(partial: k/N)`` for partial coverage."""
     i = board.info[method]
-    return f"{i['label']}{'' if i['absolute_scale'] else ' ' + DAGGER}"
+    text = f"{i['label']}{'' if i['absolute_scale'] else ' ' + DAGGER}"
+    if board.is_partial(method):
+        text += f" (partial: {board.coverage(method)}/{len(board.recordings)})"
+    return text
+
+
+def best_ranked(board: Board, values: dict[str, float], higher: bool = True) -> set[str]:
+    """:func:`best_of` among the methods that cover every recording (all methods when none does)."""
+    ranked = set(board.ranked()) or set(values)
+    return best_of({k: v for k, v in values.items() if k in ranked}, higher)
 
 
 def fmt_number(v: float, digits: int = 2) -> str:

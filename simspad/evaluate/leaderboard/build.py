@@ -1,5 +1,6 @@
-"""Writing a leaderboard: ``leaderboard.md``, ``leaderboard.csv``, ``leaderboard.html`` and the PNG files the
-markdown links (``leaderboard_*.png``, ``leaderboard_strips/``), each written atomically.
+"""Writing a leaderboard: ``leaderboard.md``, ``leaderboard.csv``, ``leaderboard_regime.csv``,
+``leaderboard.html`` and the PNG files the markdown links (``leaderboard_*.png``, ``leaderboard_strips/``), each
+written atomically.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from simspad.evaluate.leaderboard.board import build_board
 from simspad.evaluate.leaderboard.html_page import render_html
 from simspad.evaluate.leaderboard.markdown_page import render_markdown
 from simspad.evaluate.leaderboard.plots import plot_psnr_vs_bandwidth, plot_psnr_vs_lux, strip_keys, strip_png
+from simspad.evaluate.leaderboard.regime import build_regime, write_regime_csv
+from simspad.evaluate.leaderboard.regime_plots import plot_pareto_cells, plot_regime_heatmaps, plot_spad_minus_frames
 from simspad.evaluate.leaderboard.tables import write_csv_table
 from simspad.io.atomic import atomic_path, ensure_writable_dir
 from simspad.io.results_dir import slug
@@ -34,8 +37,22 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
         fname = f"leaderboard_{slug(name.lower().replace(' ', '_'))}.png"
         _write_bytes(out_dir / fname, png)
         plot_files[name] = fname
+    regime = build_regime(board)
+    regime_figures = [("PSNR over light level and image speed", "psnr", plot_regime_heatmaps(board, regime)),
+                      ("best S+E minus best F+E", "se_minus_fe", plot_spad_minus_frames(regime)),
+                      ("PSNR against bandwidth per cell", "pareto", plot_pareto_cells(board, regime))]
+    regime_pngs, regime_files = {}, {}
+    for name, short, png in regime_figures:
+        if png is None:
+            continue
+        regime_pngs[name] = png
+        regime_files[name] = f"leaderboard_regime_{short}.png"
+        _write_bytes(out_dir / regime_files[name], png)
+    with atomic_path(out_dir / "leaderboard_regime.csv") as tmp:
+        write_regime_csv(tmp, board, regime)
     strips, strip_files = [], []
-    for scene, lux, rec in strip_keys(board):
+    keys, strip_note = strip_keys(board)
+    for scene, lux, rec in keys:
         png = strip_png(board, rec, scene, lux)
         if png is None:
             continue
@@ -48,8 +65,9 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
     with atomic_path(out_dir / "leaderboard.csv") as tmp:
         write_csv_table(tmp, board)
     with atomic_path(out_dir / "leaderboard.md") as tmp:
-        tmp.write_text(render_markdown(board, plot_files, strip_files), encoding="utf-8")
+        tmp.write_text(render_markdown(board, plot_files, strip_files, regime, regime_files, strip_note),
+                       encoding="utf-8")
     html_path = out_dir / "leaderboard.html"
     with atomic_path(html_path) as tmp:
-        tmp.write_text(render_html(board, plots, strips), encoding="utf-8")
+        tmp.write_text(render_html(board, plots, strips, regime, regime_pngs, strip_note), encoding="utf-8")
     return html_path

@@ -8,8 +8,18 @@ from __future__ import annotations
 import base64
 import html
 
-from simspad.evaluate.leaderboard.board import DAGGER, Board, failed_runs, lux_levels
-from simspad.evaluate.leaderboard.tables import MTF_NOTE, lux_table, mtf_table, summary_cells, table_cells
+from simspad.evaluate.leaderboard.board import Board, failed_runs, lux_levels
+from simspad.evaluate.leaderboard.glossary import glossary_rows, notes
+from simspad.evaluate.leaderboard.regime import Regime, regime_cells, single_speed_note
+from simspad.evaluate.leaderboard.tables import (
+    MTF_NOTE,
+    PREAMBLE,
+    REGIME_NOTE,
+    lux_table,
+    star_tables,
+    summary_cells,
+    table_cells,
+)
 
 _CSS = """body{font-family:system-ui,Helvetica,Arial,sans-serif;margin:24px;color:#222;background:#fff}
 table{border-collapse:collapse;margin:12px 0;font-size:13px}th,td{border:1px solid #bbb;padding:4px 8px}
@@ -43,28 +53,41 @@ def _img_tag(png: bytes, alt: str) -> str:
     return f"<img alt=\"{html.escape(alt)}\" src=\"data:image/png;base64,{base64.b64encode(png).decode()}\">"
 
 
-def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, bytes]]) -> str:
+def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, bytes]],
+                regime: Regime | None = None, regime_plots: dict[str, bytes] | None = None,
+                strip_note: str | None = None) -> str:
     lheader, lbody = lux_table(board)
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              "<title>SimSPAD leaderboard</title>", f"<style>{_CSS}</style></head><body>",
-             "<h1>SimSPAD leaderboard</h1>",
-             "<p class=\"note\">PSNR in dB (display-mapped: white point = 99th percentile of ground truth, sRGB "
-             f"curve; DESIGN §8). Best per column in bold. {DAGGER} scored after a per-frame least-squares "
-             "affine fit in log space (no absolute scale). Bandwidth: mean over recordings.</p>",
+             "<h1>SimSPAD leaderboard</h1>", f"<p class=\"note\">{html.escape(PREAMBLE)}</p>",
              "<h2>Summary over all recordings</h2>", _html_table(*summary_cells(board)),
              "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody),
              "<h2>Methods × scenes at each light level (PSNR, dB)</h2>"]
     for lux in lux_levels(board):
         parts += [f"<h3>{lux:g} lx</h3>", _html_table(*table_cells(board, lux))]
-    mt = mtf_table(board)
-    if mt is not None:
-        parts += ["<h2>Siemens star: MTF50</h2>", f"<p class=\"note\">{html.escape(MTF_NOTE)}</p>", _html_table(*mt)]
+    stars = star_tables(board)
+    if stars:
+        parts += ["<h2>Siemens star</h2>", f"<p class=\"note\">{html.escape(MTF_NOTE)}</p>"]
+        for title, table in stars:
+            parts += [f"<h3>{html.escape(title)}</h3>", _html_table(*table)]
+    if regime is not None:
+        parts += ["<h2>Regime map: light level × image speed</h2>", f"<p class=\"note\">{html.escape(REGIME_NOTE)}</p>"]
+        one = single_speed_note(regime)
+        if one:
+            parts.append(f"<p class=\"note\">{html.escape(one)}</p>")
+        parts.append(_html_table(*regime_cells(board, regime)))
+        parts += [_img_tag(png, name) for name, png in (regime_plots or {}).items()]
     parts.append("<h2>Plots</h2>")
     parts.append("<div class=\"plots\">" + "".join(_img_tag(png, name) for name, png in plots.items()) + "</div>")
     if strips:
         parts.append("<h2>Reconstructions at the chosen instant (ground truth first)</h2>")
+        if strip_note:
+            parts.append(f"<p class=\"note\">{html.escape(strip_note)}</p>")
         for title, png in strips:
             parts.append(f"<h3>{html.escape(title)}</h3>{_img_tag(png, title)}")
+    parts += ["<h2>Glossary</h2>", _html_table(["Method", "Name", "Full name", "Sensors", "Source"],
+                                               [[(c, False) for c in row] for row in glossary_rows(board)])]
+    parts += [f"<p class=\"note\">{html.escape(n)}</p>" for n in notes(board)]
     errs = failed_runs(board)
     if errs:
         parts.append("<h2>Failed runs</h2><ul>" + "".join(

@@ -7,8 +7,18 @@ from __future__ import annotations
 
 import html
 
-from simspad.evaluate.leaderboard.board import DAGGER, Board, failed_runs, lux_levels
-from simspad.evaluate.leaderboard.tables import MTF_NOTE, lux_table, mtf_table, summary_cells, table_cells
+from simspad.evaluate.leaderboard.board import Board, failed_runs, lux_levels
+from simspad.evaluate.leaderboard.glossary import glossary_rows, notes
+from simspad.evaluate.leaderboard.regime import Regime, regime_cells, single_speed_note
+from simspad.evaluate.leaderboard.tables import (
+    MTF_NOTE,
+    PREAMBLE,
+    REGIME_NOTE,
+    lux_table,
+    star_tables,
+    summary_cells,
+    table_cells,
+)
 
 
 #: Markdown syntax characters escaped with a backslash in user text, so a method name cannot become a link, an
@@ -30,24 +40,38 @@ def md_table(header, body, text_columns: int = 2) -> str:
     return "\n".join(lines)
 
 
-def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[tuple[str, str]]) -> str:
+def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[tuple[str, str]],
+                    regime: Regime | None = None, regime_files: dict[str, str] | None = None,
+                    strip_note: str | None = None) -> str:
     lheader, lbody = lux_table(board)
-    out = ["# SimSPAD leaderboard", "",
-           f"PSNR in dB (DESIGN §8 display mapping). Best per column in bold. {DAGGER}: scored after a per-frame "
-           "least-squares affine fit in log space (no absolute scale). Bandwidth: mean over recordings.", "",
-           "## Summary over all recordings", "", md_table(*summary_cells(board)), "",
+    out = ["# SimSPAD leaderboard", "", md_escape(PREAMBLE), "",
+           "## Summary over all recordings", "", md_table(*summary_cells(board), 3), "",
            "## Mean PSNR per light level (dB)", "", md_table(lheader, lbody, 1), "",
            "## Methods × scenes at each light level (PSNR, dB)", ""]
     for lux in lux_levels(board):
         out += [f"### {lux:g} lx", "", md_table(*table_cells(board, lux)), ""]
-    mt = mtf_table(board)
-    if mt is not None:
-        out += ["## Siemens star: MTF50", "", md_escape(MTF_NOTE), "", md_table(*mt, 1), ""]
+    stars = star_tables(board)
+    if stars:
+        out += ["## Siemens star", "", md_escape(MTF_NOTE), ""]
+        for title, (header, body) in stars:
+            out += [f"### {md_escape(title)}", "", md_table(header, body, 1), ""]
+    if regime is not None:
+        out += ["## Regime map: light level × image speed", "", md_escape(REGIME_NOTE), ""]
+        one = single_speed_note(regime)
+        if one:
+            out += [md_escape(one), ""]
+        out += [md_table(*regime_cells(board, regime), 1), ""]
+        out += [f"![{md_escape(name)}]({f})" for name, f in (regime_files or {}).items()] + [""]
     out += ["## Plots", ""]
     out += [f"![{md_escape(name)}]({f})" for name, f in plot_files.items()]
     if strip_files:
         out += ["", "## Reconstructions at the chosen instant (ground truth first)", ""]
+        if strip_note:
+            out += [md_escape(strip_note), ""]
         out += [f"![{md_escape(t)}]({f})" for t, f in strip_files]
+    out += ["", "## Glossary", "", md_table(["Method", "Name", "Full name", "Sensors", "Source"],
+                                            [[(c, False) for c in row] for row in glossary_rows(board)], 5), ""]
+    out += [f"- {md_escape(n)}" for n in notes(board)]
     errs = failed_runs(board)
     if errs:
         out += ["", "## Failed runs", ""] + [f"- {md_escape(m)}: {md_escape(e)}" for m, e in errs]

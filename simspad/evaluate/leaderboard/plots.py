@@ -41,50 +41,87 @@ def figure_png(fig) -> bytes:
     return buf.getvalue()
 
 
+_MARKERS = "osD^vP*Xh<>p"
+
+
+def method_styles(board: Board) -> dict[str, dict]:
+    """A colour and marker per method (tab10 colours, then markers), the same on every figure."""
+    plt = _pyplot()
+    colors = plt.get_cmap("tab10").colors
+    return {m: {"color": colors[i % len(colors)], "marker": _MARKERS[(i // len(colors) + i) % len(_MARKERS)]}
+            for i, m in enumerate(board.methods)}
+
+
 def plot_psnr_vs_lux(board: Board) -> bytes:
     """Mean PSNR over scenes versus scene illuminance, one line per method."""
     plt = _pyplot()
     means = lux_means(board)
+    styles = method_styles(board)
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for m in board.methods:
         luxes = [l for l in lux_levels(board) if math.isfinite(means[m][l])]
         if luxes:
-            ax.plot(luxes, [means[m][l] for l in luxes], "o-", label=plot_text(method_label(board, m)))
+            ax.plot(luxes, [means[m][l] for l in luxes], "-", marker=styles[m]["marker"], color=styles[m]["color"],
+                    label=plot_text(method_label(board, m)))
     ax.set_xscale("log")
     ax.set_xlabel("scene illuminance (lx)")
     ax.set_ylabel("PSNR (dB), mean over scenes")
     ax.set_title("PSNR versus light level")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return figure_png(fig)
 
 
 def plot_psnr_vs_bandwidth(board: Board) -> bytes:
-    """Mean PSNR over recordings versus mean bandwidth, one point per method."""
+    """Mean PSNR over recordings versus mean bandwidth, one point per method.
+
+    Methods are told apart by colour and marker in a legend beside the axes, never by text next to the points:
+    methods of equal bandwidth and PSNR (NEDI+AKF and its adaptive variant at full readout) would overlap.
+    """
     plt = _pyplot()
+    styles = method_styles(board)
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for m in board.methods:
         i = board.info[m]
         bw, p = i["bw_khz_mean"], i["psnr_mean"]
         if math.isfinite(bw) and math.isfinite(p) and bw > 0:
-            ax.plot([bw], [p], "o", markersize=8, label=plot_text(method_label(board, m)))
-            ax.annotate(plot_text(i["label"]), (bw, p), textcoords="offset points", xytext=(5, 4), fontsize=8)
+            ax.plot([bw], [p], linestyle="", marker=styles[m]["marker"], color=styles[m]["color"], markersize=8,
+                    alpha=0.85, label=plot_text(method_label(board, m)))
     ax.set_xscale("log")
     ax.set_xlabel("bandwidth (kHz per pixel)")
     ax.set_ylabel("PSNR (dB), mean over recordings")
     ax.set_title("PSNR versus bandwidth")
     ax.grid(True, which="both", alpha=0.3)
     if ax.lines:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return figure_png(fig)
 
 
-def strip_keys(board: Board) -> list[tuple[str, float, str]]:
-    """(scene, lux, recording) of the recordings shown as image strips (at most MAX_STRIPS, spread evenly)."""
+def strip_keys(board: Board) -> tuple[list[tuple[str, float, str]], str | None]:
+    """(scene, lux, recording) of the recordings shown as image strips, and a note when some are left out.
+
+    Every scene is shown at the same light levels: the levels all scenes share, spread evenly, as many as fit in
+    :data:`MAX_STRIPS` strips; the note says which levels are shown and why when that is not all of them.
+    """
     recs = sorted({(r["scene"], float(r["lux"]), r["recording"]) for r in board.rows})
-    if len(recs) > MAX_STRIPS:
-        recs = [recs[i] for i in np.linspace(0, len(recs) - 1, MAX_STRIPS).round().astype(int)]
-    return recs
+    scenes = sorted({s for s, _, _ in recs})
+    by_scene = {s: {l for s2, l, _ in recs if s2 == s} for s in scenes}
+    shared = sorted(set.intersection(*by_scene.values())) if by_scene else []
+    per_level = max(1, max(len([x for x in recs if x[0] == s and x[1] == l]) for s, l, _ in recs)) if recs else 1
+    n_levels = max(1, MAX_STRIPS // max(1, len(scenes) * per_level))
+    levels = shared
+    if len(shared) > n_levels:
+        levels = [shared[i] for i in np.linspace(0, len(shared) - 1, n_levels).round().astype(int)]
+    chosen = [x for x in recs if x[1] in set(levels)][:MAX_STRIPS]
+    all_levels = sorted({l for _, l, _ in recs})
+    note = None
+    if levels != all_levels:
+        why = [] if len(levels) == len(shared) else [f"at most {MAX_STRIPS} strips"]
+        if len(shared) < len(all_levels):
+            why.append("the other levels are missing for some scenes")
+        note = (f"Strips show every scene at {', '.join(f'{l:g}' for l in levels) or 'no common'} lx "
+                f"({'; '.join(why)}).")
+    return chosen, note
 
 
 def strip_png(board: Board, recording: str, scene: str, lux: float) -> bytes | None:

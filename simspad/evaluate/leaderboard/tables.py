@@ -9,9 +9,11 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+from simspad.evaluate.metrics import STAR_FREQS_CYC_PX
 from simspad.evaluate.leaderboard.board import (
     Board,
     best_of,
+    best_ranked,
     fmt_bandwidth,
     fmt_number,
     lux_levels,
@@ -23,13 +25,17 @@ from simspad.evaluate.leaderboard.board import (
 
 def summary_cells(board: Board):
     """The summary table: each method's bandwidth and mean PSNR / SSIM over all recordings."""
-    header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s", "Mean PSNR (dB)", "Mean SSIM"]
-    best = [best_of({m: board.info[m][k] for m in board.methods}, higher=h)
+    header = ["Rank", "Method", "Sensors", "Recordings", "Bandwidth (kHz/px)", "Bits/px/s", "Mean PSNR (dB)",
+              "Mean SSIM"]
+    best = [best_ranked(board, {m: board.info[m][k] for m in board.methods}, higher=h)
             for k, h in (("bw_khz_mean", False), ("bw_bits_mean", False), ("psnr_mean", True), ("ssim_mean", True))]
     body = []
+    ranked = board.ranked()
     for m in board.methods:
         i = board.info[m]
-        body.append([(method_label(board, m), False), (i["sensors"], False),
+        rank = str(ranked.index(m) + 1) if m in ranked else "–"
+        body.append([(rank, False), (method_label(board, m), False), (i["sensors"], False),
+                     (f"{board.coverage(m)}/{len(board.recordings)}", False),
                      (fmt_bandwidth(i["bw_khz_mean"]), m in best[0]), (fmt_bandwidth(i["bw_bits_mean"]), m in best[1]),
                      (fmt_number(i["psnr_mean"]), m in best[2]),
                      (fmt_number(i["ssim_mean"], 3), m in best[3])])
@@ -56,9 +62,9 @@ def table_cells(board: Board, lux: float | None = None):
     header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s"] + \
         [s if lux is not None else f"{s} @ {l:g} lx" for s, l in columns] + ["Mean PSNR"]
     best_cols = [best_of({m: board.psnr.get((m, s, l), float("nan")) for m in board.methods}) for s, l in columns]
-    best_bw = best_of({m: bandwidth(m, "khz") for m in board.methods}, higher=False)
-    best_bits = best_of({m: bandwidth(m, "bits") for m in board.methods}, higher=False)
-    best_mean = best_of({m: mean_psnr(m) for m in board.methods})
+    best_bw = best_ranked(board, {m: bandwidth(m, "khz") for m in board.methods}, higher=False)
+    best_bits = best_ranked(board, {m: bandwidth(m, "bits") for m in board.methods}, higher=False)
+    best_mean = best_ranked(board, {m: mean_psnr(m) for m in board.methods})
     body = []
     for m in board.methods:
         cells = [(method_label(board, m), False), (board.info[m]["sensors"], False),
@@ -74,27 +80,52 @@ def table_cells(board: Board, lux: float | None = None):
 def lux_table(board: Board):
     luxes = lux_levels(board)
     means = lux_means(board)
-    best = [best_of({m: means[m][l] for m in board.methods}) for l in luxes]
+    best = [best_ranked(board, {m: means[m][l] for m in board.methods}) for l in luxes]
     header = ["Method"] + [f"{l:g} lx" for l in luxes]
     body = [[(method_label(board, m), False)] + [(fmt_number(means[m][l]), m in best[j]) for j, l in enumerate(luxes)]
             for m in board.methods]
     return header, body
 
 
-def mtf_table(board: Board):
-    """MTF50 (cycles/px) of the Siemens-star recordings, or None when there are none."""
-    cols = sorted({(s, l) for _, s, l in board.mtf50})
+def star_tables(board: Board) -> list[tuple[str, tuple]]:
+    """(title, (header, body)) of each Siemens-star figure (MTF at the fixed frequencies, MTF50); [] without a star.
+
+    Cells are methods × (scene, lux) of the star recordings; best = highest.
+    """
+    cols = sorted({(s, l) for (_, s, l), v in board.star.items() if v})
     if not cols:
-        return None
-    best = [best_of({m: board.mtf50.get((m, s, l), float("nan")) for m in board.methods}) for s, l in cols]
-    header = ["Method"] + [f"{s} @ {l:g} lx" for s, l in cols]
-    body = [[(method_label(board, m), False)] + [(fmt_number(board.mtf50.get((m, s, l), float("nan")), 3), m in best[j])
-                                           for j, (s, l) in enumerate(cols)] for m in board.methods]
-    return header, body
+        return []
+    out = []
+    for key, title in STAR_FIGURES:
+        vals = {(m, s, l): board.star.get((m, s, l), {}).get(key, float("nan")) for m in board.methods
+                for s, l in cols}
+        best = [best_of({m: vals[(m, s, l)] for m in board.methods}) for s, l in cols]
+        header = ["Method"] + [f"{s} @ {l:g} lx" for s, l in cols]
+        body = [[(method_label(board, m), False)] + [(fmt_number(vals[(m, s, l)], 3), m in best[j])
+                                                     for j, (s, l) in enumerate(cols)] for m in board.methods]
+        out.append((title, (header, body)))
+    return out
 
 
-MTF_NOTE = ("MTF50 in cycles per pixel relative to the ground truth (0.5 = stays above half contrast up to "
-            "Nyquist; – = already below 0.5 at the lowest measured frequency, or no star).")
+#: The Siemens-star columns of results.csv shown on the leaderboard, with their table titles.
+STAR_FIGURES = tuple((f"mtf_at_{f:.2f}_cyc_px".replace(".", "p"), f"MTF at {f:g} cycles/px")
+                     for f in STAR_FREQS_CYC_PX) + (("mtf50_cyc_px", "MTF50 (cycles/px)"),)
+
+PREAMBLE = ("PSNR in dB on display-mapped frames (white point: 99th percentile of the ground truth over the "
+            "sequence; sRGB transfer curve). Best per column in bold, among the methods scored on every recording. "
+            "Bandwidth: mean over recordings. Marks († and partial) are explained in the glossary at the end.")
+
+REGIME_NOTE = ("PSNR (dB, mean over scenes) per light level and image speed. Speed rows are the dataset's speed "
+               "factors, labelled with the median image speed measured in their recordings (px/s). The last row "
+               "is the best SPAD + events method minus the best frames + events method: positive where SPAD + "
+               "events wins. Numbers also in leaderboard_regime.csv.")
+
+MTF_NOTE = ("Siemens star: the reconstruction's contrast relative to the ground truth's along circles around the "
+            "star's centre (1 = as sharp as the ground truth). MTF at a fixed frequency tells methods apart even "
+            "when they keep more than half the contrast up to Nyquist (0.5 cycles/px), where MTF50 cannot be "
+            "measured. – = not measurable: a frequency below the lowest the star's outer circle carries at this "
+            "resolution (n cycles / (2π × radius)), an MTF50 that is not reached by Nyquist or already passed at "
+            "the lowest measured frequency, or a failed run.")
 
 
 def csv_safe(value):

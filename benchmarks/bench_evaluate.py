@@ -1,0 +1,131 @@
+"""Evaluate throughput: today's code against a baseline revision on the same recordings, in the same session.
+
+Both versions run ``python -m simspad.cli evaluate`` as subprocesses on the same subset of a dataset (a directory of
+symbolic links to its recordings), after a warm-up run of their own on one recording so that numba caches are warm
+for both; the baseline's source is exported with ``git archive``. Reported: wall seconds and CPU seconds (user +
+system of the process tree) of each and the ratios, and whether the two results tables agree (every column but
+``runtime_s`` and the columns the baseline does not have).
+
+Then the fresh-process warm-up of the methods: the first reconstruction of each method in a new process, with an
+empty numba cache (the first run after an install) and with the cache that run left (every later run).
+
+    python benchmarks/bench_evaluate.py DATASET [--recordings N] [--baseline REV]
+
+Skips (exit 0, with a message) when git or the baseline revision is unavailable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+WARMUP_SCRIPT = r"""
+import sys, time
+from simspad.evaluate.protocol import evaluation_indices
+from simspad.io.recording import open_recording
+from simspad.methods.registry import available_methods, get_method
+with open_recording(sys.argv[1]) as rec:
+    times = rec.gt.t[evaluation_indices(rec.gt.t, 1000.0)][:2]
+    for name in available_methods(rec):
+        t0 = time.perf_counter()
+        for _ in get_method(name).reconstruct(rec, times):
+            pass
+        print(f"{name} {time.perf_counter() - t0:.3f}", flush=True)
+"""
+
+
+def run_timed(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str]:
+    """(wall s, CPU s of the process tree, stdout) of one command."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    res = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if res.returncode not in (0, 1):
+        sys.exit(f"command failed ({res.returncode}): {' '.join(cmd)}\n{res.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, res.stdout
+
+
+def subset(dataset: Path, n: int, dest: Path) -> list[Path]:
+    """Links to ``n`` recordings of ``dataset`` spread over scenes and light levels, in ``dest``."""
+    recs = sorted(p for p in (dataset / "recordings").rglob("*.h5") if not p.name.startswith("."))
+    if not recs:
+        sys.exit(f"no recordings under {dataset / 'recordings'}")
+    step = max(1, len(recs) // n)
+    chosen = recs[::step][:n]
+    dest.mkdir(parents=True)
+    for p in chosen:
+        (dest / p.name).symlink_to(p.resolve())
+    return chosen
+
+
+def compare(a: Path, b: Path) -> str:
+    """Whether two results.csv agree on the columns both have, ``runtime_s`` aside."""
+    def rows(p):
+        with open(p, newline="", encoding="utf-8") as f:
+            return list(csv.DictReader(f))
+    ra, rb = rows(a), rows(b)
+    common = [c for c in ra[0] if c in rb[0] and c not in ("runtime_s", "mtf50_cyc_px")] if ra and rb else []
+    same = len(ra) == len(rb) and all(x[c] == y[c] for x, y in zip(ra, rb) for c in common)
+    return f"{len(ra)} rows, {len(common)} common columns {'identical' if same else 'DIFFERENT'}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("dataset", type=Path)
+    ap.add_argument("--recordings", type=int, default=5, help="recordings evaluated (default 5; 0: all)")
+    ap.add_argument("--baseline", default="d1f88c3", help="git revision of the baseline (default d1f88c3)")
+    args = ap.parse_args()
+    if shutil.which("git") is None:
+        print("skipped: git not found")
+        return
+    with tempfile.TemporaryDirectory(prefix="bench_evaluate_") as tmp:
+        tmp = Path(tmp)
+        base_src = tmp / "baseline"
+        base_src.mkdir()
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", args.baseline, "simspad"],
+                                 capture_output=True)
+        if archive.returncode != 0:
+            print(f"skipped: baseline revision {args.baseline} not available ({archive.stderr.decode()[:200]})")
+            return
+        subprocess.run(["tar", "-x", "-C", str(base_src)], input=archive.stdout, check=True)
+        n = args.recordings or 10 ** 9
+        chosen = subset(args.dataset, n, tmp / "subset")
+        subset(args.dataset, 1, tmp / "warm")
+        print(f"{len(chosen)} recordings of {args.dataset}: {', '.join(p.stem for p in chosen)}")
+        results = {}
+        for name, src in (("baseline", base_src), ("today", REPO)):
+            env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=str(tmp / f"numba_{name}"),
+                       SOURCE_DATE_EPOCH="1700000000")
+            cli = [sys.executable, "-m", "simspad.cli", "evaluate"]
+            run_timed(cli + [str(tmp / "warm"), "--out", str(tmp / f"warm_{name}")], env, tmp)
+            wall, cpu, out = run_timed(cli + [str(tmp / "subset"), "--out", str(tmp / f"out_{name}")], env, tmp)
+            results[name] = (wall, cpu)
+            print(f"{name:9s} wall {wall:7.1f} s   CPU {cpu:7.1f} s")
+            if name == "today":
+                print(out[out.find("timings"):].rstrip())
+        (bw, bc), (tw, tc) = results["baseline"], results["today"]
+        print(f"speed-up   wall {bw / tw:5.2f}x   CPU {bc / tc:5.2f}x")
+        print("results:", compare(tmp / "out_baseline" / "results.csv", tmp / "out_today" / "results.csv"))
+
+        rec = str(chosen[0])
+        env = dict(os.environ, PYTHONPATH=str(REPO), NUMBA_CACHE_DIR=str(tmp / "numba_fresh"))
+        for label in ("empty numba cache (first run after install)", "warm numba cache (later runs)"):
+            wall, _, out = run_timed([sys.executable, "-c", WARMUP_SCRIPT, rec], env, tmp)
+            per = ", ".join(f"{a} {float(b):.2f}s" for a, b in (line.split() for line in out.split("\n") if line))
+            print(f"fresh process, {label}: {wall:.1f} s in all; first reconstruction: {per}")
+
+
+if __name__ == "__main__":
+    main()

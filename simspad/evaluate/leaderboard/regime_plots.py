@@ -1,0 +1,122 @@
+"""The regime map's figures as PNG bytes: PSNR heatmaps over lux × image speed, the S+E − F+E difference with its
+0 dB contour, and PSNR against bandwidth per cell with the Pareto front.
+
+Rows are speed factors (labelled with the measured image speed in px/s), columns light levels in lux. Every
+number drawn is also in ``leaderboard_regime.csv`` and the markdown table.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from simspad.evaluate.leaderboard.board import Board, method_label
+from simspad.evaluate.leaderboard.plots import _pyplot, figure_png, method_styles, plot_text
+from simspad.evaluate.leaderboard.regime import (
+    FRAMES_EVENTS,
+    SPAD_EVENTS,
+    Regime,
+    cell_points,
+    pareto_front,
+)
+
+
+def _axes_labels(ax, regime: Regime) -> None:
+    ax.set_xticks(range(len(regime.luxes)), [f"{lux:g}" for lux in regime.luxes], fontsize=7)
+    ax.set_yticks(range(len(regime.speeds)), [regime.speed_label(k) for k in regime.speeds], fontsize=7)
+    ax.set_xlabel("scene illuminance (lx)", fontsize=8)
+    ax.set_ylabel("speed factor (median image speed, px/s)", fontsize=8)
+
+
+def _annotate(ax, grid: np.ndarray, fmt: str) -> None:
+    for (i, j), v in np.ndenumerate(grid):
+        if math.isfinite(v):
+            ax.text(j, i, format(v, fmt), ha="center", va="center", fontsize=7,
+                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.6})
+
+
+def plot_regime_heatmaps(board: Board, regime: Regime) -> bytes:
+    """One PSNR heatmap (dB, shared colour scale) per method over lux × speed."""
+    plt = _pyplot()
+    n = len(regime.methods)
+    ncols = min(4, n)
+    nrows = -(-n // ncols)
+    h = max(1.6, 0.55 * len(regime.speeds) + 1.3)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, h * nrows + 0.6), squeeze=False,
+                             constrained_layout=True)
+    grids = [regime.grid(m) for m in regime.methods]
+    finite = np.concatenate([g[np.isfinite(g)] for g in grids] + [np.empty(0)])
+    vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    im = None
+    for ax, m, g in zip(axes.flat, regime.methods, grids):
+        im = ax.imshow(g, cmap="viridis", vmin=vmin, vmax=vmax, aspect="auto", origin="lower")
+        _annotate(ax, g, ".1f")
+        _axes_labels(ax, regime)
+        ax.set_title(plot_text(method_label(board, m)), fontsize=8)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    if im is not None:
+        fig.colorbar(im, ax=axes, shrink=0.8, label="PSNR (dB), mean over scenes")
+    fig.suptitle("PSNR over light level × image speed", fontsize=10)
+    return figure_png(fig)
+
+
+def plot_spad_minus_frames(regime: Regime) -> bytes | None:
+    """Best S+E − best F+E PSNR (dB) over lux × speed, with the 0 dB contour; None without both pairs."""
+    diff = regime.spad_minus_frames()
+    if diff is None:
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, max(2.2, 0.6 * len(regime.speeds) + 1.6)), constrained_layout=True)
+    lim = float(np.nanmax(np.abs(diff))) if np.isfinite(diff).any() else 1.0
+    lim = lim if lim > 0 else 1.0
+    im = ax.imshow(diff, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto", origin="lower")
+    _annotate(ax, diff, "+.1f")
+    _axes_labels(ax, regime)
+    title = f"best {SPAD_EVENTS} − best {FRAMES_EVENTS} (dB); red: {SPAD_EVENTS} wins"
+    if diff.shape[0] >= 2 and diff.shape[1] >= 2 and np.isfinite(diff).all() and diff.min() < 0 < diff.max():
+        ax.contour(np.arange(diff.shape[1]), np.arange(diff.shape[0]), diff, levels=[0.0], colors="k",
+                   linewidths=1.5)
+        title += "; black line: 0 dB"
+    elif diff.shape[0] < 2:
+        title += "; one speed: no contour"
+    ax.set_title(title, fontsize=8)
+    fig.colorbar(im, ax=ax, label="PSNR difference (dB)")
+    return figure_png(fig)
+
+
+def plot_pareto_cells(board: Board, regime: Regime) -> bytes:
+    """PSNR against bandwidth in every (lux, speed) cell; Pareto-optimal methods ringed and joined."""
+    plt = _pyplot()
+    styles = method_styles(board)
+    nr, nc = len(regime.speeds), len(regime.luxes)
+    fig, axes = plt.subplots(nr, nc, figsize=(2.6 * nc + 2.6, 2.3 * nr + 0.6), squeeze=False, sharex=True,
+                             constrained_layout=True)
+    for i, k in enumerate(regime.speeds):
+        for j, lux in enumerate(regime.luxes):
+            ax = axes[nr - 1 - i, j]  # fastest speed on top, as on the heatmaps
+            pts = cell_points(regime, lux, k)
+            front = pareto_front(pts)
+            for m, (b, q) in pts.items():
+                st = styles[m]
+                ax.plot([b], [q], st["marker"], color=st["color"], markersize=6,
+                        markeredgecolor="k" if m in front else st["color"], markeredgewidth=1.4 if m in front else 0.5)
+            if front:
+                fp = sorted(pts[m] for m in front)
+                ax.step([p[0] for p in fp], [p[1] for p in fp], where="post", color="k", lw=0.8, alpha=0.6)
+            ax.set_xscale("log")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.tick_params(labelsize=7)
+            ax.set_title(f"{lux:g} lx, {regime.speed_label(k)}", fontsize=7)
+            if j == 0:
+                ax.set_ylabel("PSNR (dB)", fontsize=7)
+            if i == 0:
+                ax.set_xlabel("bandwidth (kHz per pixel)", fontsize=7)
+    handles = [plt.Line2D([], [], linestyle="", marker=styles[m]["marker"], color=styles[m]["color"],
+                          label=plot_text(method_label(board, m))) for m in regime.methods]
+    handles.append(plt.Line2D([], [], linestyle="-", color="k", marker="o", markerfacecolor="none",
+                              label="Pareto front (ringed)"))
+    fig.legend(handles=handles, loc="outside right upper", fontsize=7)
+    fig.suptitle("PSNR against bandwidth per cell", fontsize=10)
+    return figure_png(fig)
