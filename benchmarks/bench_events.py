@@ -23,8 +23,8 @@ Two comparisons:
    reference's CPU time at SimSPAD's default accuracy (log-log interpolation) over SimSPAD's. The diagram goes
    to ``benchmarks/results/bench_events.png``.
 
-1b. **v2e itself** (optional): v2e's own ``EventEmulator`` (torch on the CPU, as many intra-op threads as SimSPAD has
-   numba threads) and SimSPAD, each in a fresh process on the same keyframes, with matched thresholds, cutoff,
+1b. **v2e itself** (optional): v2e's own ``EventEmulator`` (torch on the CPU, the faster of one intra-op thread and as
+   many as SimSPAD has numba threads) and SimSPAD, each in a fresh process on the same keyframes, with matched thresholds, cutoff,
    leak, refractory period and mean shot-noise rate. v2e runs from the venv ``$SIMSPAD_V2E_VENV``
    (default ``/work/venvs/v2e``: CPU torch, numpy, scipy, h5py, opencv-python-headless, numba, and v2e's
    ``v2ecore`` package copied from github.com/SensorsINI/v2e into its ``src/``); skipped when it is absent.
@@ -442,8 +442,11 @@ def v2e_inputs(tl: Timeline, params: EventParams, lux: float) -> tuple[np.ndarra
 
 
 def run_v2e(tl: Timeline, params: EventParams, lux: float, threads: int, repeat: int = 1) -> dict | None:
-    """v2e's ``EventEmulator`` (torch, CPU, ``threads`` intra-op threads) on the keyframes of ``tl``, in a fresh
-    process of the v2e venv, and SimSPAD in a fresh process of this interpreter on the same keyframes.
+    """v2e's ``EventEmulator`` (torch, CPU) on the keyframes of ``tl``, in a fresh process of the v2e venv, and
+    SimSPAD (``threads`` numba threads) in a fresh process of this interpreter on the same keyframes.
+
+    v2e runs once with one torch thread and once with ``threads``, and its faster run is kept: torch's many small
+    parallel regions per frame can lose more to thread hand-offs than they gain on a busy machine.
 
     Each child runs its simulator ``1 + repeat`` times: the first run includes the warm-up of a new process
     (imports, torch's first calls, numba's cache load); the steady state is the best of the others (for v2e, the
@@ -460,17 +463,20 @@ def run_v2e(tl: Timeline, params: EventParams, lux: float, threads: int, repeat:
         return None
     frames_dn, matched = v2e_inputs(tl, params, lux)
     flux = np.stack([tl.keyframe(i) for i in range(tl.times_s.size)])
-    env = {**os.environ, "PYTHONPATH": str(V2E_VENV / "src"), "OMP_NUM_THREADS": str(threads)}
+    env = {**os.environ, "PYTHONPATH": str(V2E_VENV / "src")}
     with tempfile.TemporaryDirectory() as tmp:
         inputs = Path(tmp) / "keyframes.npz"
         np.savez(inputs, times_s=tl.times_s, frames_dn=frames_dn, frames=flux.astype(np.float32), scale=1.0)
         out = {}
-        done = subprocess.run([str(python), "-c", _V2E_CHILD, str(inputs), json.dumps(matched), str(threads),
-                               str(repeat)],
-                              capture_output=True, text=True, env=env, cwd=tmp, check=False)
-        if done.returncode != 0:
-            raise RuntimeError(f"v2e child failed:\n{done.stderr[-3000:]}")
-        out["v2e"] = json.loads(done.stdout.strip().splitlines()[-1])
+        for n_threads in sorted({1, threads}):
+            env["OMP_NUM_THREADS"] = str(n_threads)
+            done = subprocess.run([str(python), "-c", _V2E_CHILD, str(inputs), json.dumps(matched), str(n_threads),
+                                   str(repeat)], capture_output=True, text=True, env=env, cwd=tmp, check=False)
+            if done.returncode != 0:
+                raise RuntimeError(f"v2e child failed:\n{done.stderr[-3000:]}")
+            run = json.loads(done.stdout.strip().splitlines()[-1]) | {"threads": n_threads}
+            if "v2e" not in out or run["wall_s"] < out["v2e"]["wall_s"]:
+                out["v2e"] = run
         env_s = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
         done = subprocess.run([sys.executable, "-c", _SIMSPAD_CHILD, str(inputs), str(lux),
                                str(Path(__file__).parent), str(repeat)], capture_output=True, text=True, env=env_s,
@@ -488,7 +494,10 @@ def main(argv=None):
     parser.add_argument("--keyframes", type=int, default=100)
     parser.add_argument("--rate", type=float, default=1000.0, help="keyframe rate, Hz")
     parser.add_argument("--lux", type=float, default=1000.0)
+    parser.add_argument("--flow", type=float, default=0.5, help="image motion per keyframe, pixels")
     parser.add_argument("--repeat", type=int, default=3, help="runs per contender; the fastest is reported")
+    parser.add_argument("--wp", action=argparse.BooleanOptionalAction, default=True,
+                        help="run the work-precision comparison (2.)")
     parser.add_argument("--wp-size", type=int, default=128, help="work-precision scene width = height, pixels")
     parser.add_argument("--wp-keyframes", type=int, default=21)
     parser.add_argument("--wp-lux", type=float, nargs="+", default=[10.0, 100.0, 1000.0],
@@ -503,7 +512,7 @@ def main(argv=None):
     parser.add_argument("--v2e-repeat", type=int, default=2, help="warm runs per fresh process in the v2e section")
     args = parser.parse_args(argv)
     params = EventParams()
-    tl = make_timeline(args.size, args.keyframes, args.rate, args.lux)
+    tl = make_timeline(args.size, args.keyframes, args.rate, args.lux, flow_px=args.flow)
     duration = tl.t_end - tl.t_start
 
     small = make_timeline(16, 4, args.rate, args.lux)  # warm-up: numba compile / cache load, NumPy first calls
@@ -518,7 +527,8 @@ def main(argv=None):
     n_s, wall_s, cpu_s = runs_s[0][0], best(runs_s, 1), best(runs_s, 2)
     n_k, wall_k, cpu_k = runs_n[0][0], best(runs_n, 1), best(runs_n, 2)
     kf = args.keyframes - 1
-    print(f"1. same input: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "
+    print(f"1. same input: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz, "
+          f"{args.flow:g} px per keyframe "
           f"({duration * 1e3:.0f} ms), {args.lux:g} lx, full model; simspad on {numba.get_num_threads()} numba "
           f"thread(s) (NUMBA_NUM_THREADS), NumPy reference single-threaded; best of {args.repeat} alternating runs")
     print(f"{'run':<22}{'wall s':>8}{'cpu s':>8}{'events':>10}{'events/s':>10}{'ev/cpu-s':>10}{'kf/s':>8}"
@@ -533,7 +543,8 @@ def main(argv=None):
         if v2e is None:
             print(f"1b. v2e: skipped (no venv with torch and v2ecore sources at {V2E_VENV})")
         else:
-            print(f"1b. v2e's EventEmulator (torch CPU, {numba.get_num_threads()} thread(s)) and SimSPAD, each in a "
+            print(f"1b. v2e's EventEmulator (torch CPU, {v2e['v2e']['threads']} thread(s), the faster of 1 and "
+                  f"{numba.get_num_threads()}) and SimSPAD ({numba.get_num_threads()} numba thread(s)), each in a "
                   "fresh process on the same keyframes; v2e matched: " +
                   ", ".join(f"{k}={v:g}" for k, v in v2e["matched"].items()))
             print(f"{'run':<22}{'events':>10}{'wall s':>8}{'cpu s':>8}{'events/s':>10}{'ev/cpu-s':>10}"
@@ -555,7 +566,7 @@ def main(argv=None):
 
     window_s = 100e-6
     results = {}
-    for lux in args.wp_lux:
+    for lux in args.wp_lux if args.wp else ():
         rows, speedups = results[lux] = work_precision(args.wp_size, args.wp_keyframes, args.rate, lux, window_s,
                                                        args.repeat)
         print(f"2. work-precision at {lux:g} lx: {args.wp_size}x{args.wp_size} px, {args.wp_keyframes} keyframes, "
@@ -567,7 +578,7 @@ def main(argv=None):
         for name, (ratio, bound) in speedups.items():
             print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance "
                   f"{DEFAULT_TOLERANCE:g}) vs {name}: {'>' if bound else ''}{ratio:.1f}x CPU time")
-    if args.plot:
+    if args.plot and results:
         plot_work_precision(results, args.wp_size, args.wp_keyframes, window_s, args.plot)
         print(f"work-precision diagram: {args.plot}")
     if args.memory:
