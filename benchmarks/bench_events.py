@@ -23,9 +23,9 @@ Two comparisons:
    reference's CPU time at SimSPAD's default accuracy (log-log interpolation) over SimSPAD's. The diagram goes
    to ``benchmarks/results/bench_events.png``.
 
-1b. **v2e itself** (optional): v2e's own ``EventEmulator`` (torch on the CPU, the faster of one intra-op thread and as
-   many as SimSPAD has numba threads) and SimSPAD, each in a fresh process on the same keyframes, with matched thresholds, cutoff,
-   leak, refractory period and mean shot-noise rate. v2e runs from the venv ``$SIMSPAD_V2E_VENV``
+1b. **v2e itself** (optional): v2e's own ``EventEmulator`` (torch on the CPU, the faster of one intra-op thread and
+   as many as SimSPAD has numba threads) and SimSPAD, each in a fresh process on the same keyframes, with matched
+   thresholds, cutoff, leak, refractory period and mean shot-noise rate. v2e runs from the venv ``$SIMSPAD_V2E_VENV``
    (default ``/work/venvs/v2e``: CPU torch, numpy, scipy, h5py, opencv-python-headless, numba, and v2e's
    ``v2ecore`` package copied from github.com/SensorsINI/v2e into its ``src/``); skipped when it is absent.
    Each process runs ``1 + --v2e-repeat`` times: whole-process figures (imports, warm-up, first run) and the best
