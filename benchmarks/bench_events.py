@@ -562,7 +562,8 @@ def main(argv=None):
                   f"{rate(mine, 'process_wall_s') / rate(theirs, 'process_wall_s'):.2f}x wall, "
                   f"{rate(mine, 'process_cpu_s') / rate(theirs, 'process_cpu_s'):.2f}x CPU time")
             print(f"SimSPAD warm-up of a fresh process (first run minus a warm run): "
-                  f"{mine['first_wall_s'] - mine['wall_s']:.2f} s wall, {mine['first_cpu_s'] - mine['cpu_s']:.2f} s CPU")
+                  f"{mine['first_wall_s'] - mine['wall_s']:.2f} s wall, "
+                  f"{mine['first_cpu_s'] - mine['cpu_s']:.2f} s CPU")
 
     window_s = 100e-6
     results = {}
