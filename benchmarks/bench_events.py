@@ -23,6 +23,14 @@ Two comparisons:
    reference's CPU time at SimSPAD's default accuracy (log-log interpolation) over SimSPAD's. The diagram goes
    to ``benchmarks/results/bench_events.png``.
 
+1b. **v2e itself** (optional): v2e's own ``EventEmulator`` (torch on the CPU, the faster of one intra-op thread and
+   as many as SimSPAD has numba threads) and SimSPAD, each in a fresh process on the same keyframes, with matched
+   thresholds, cutoff, leak, refractory period and mean shot-noise rate. v2e runs from the venv ``$SIMSPAD_V2E_VENV``
+   (default ``/work/venvs/v2e``: CPU torch, numpy, scipy, h5py, opencv-python-headless, numba, and v2e's
+   ``v2ecore`` package copied from github.com/SensorsINI/v2e into its ``src/``); skipped when it is absent.
+   Each process runs ``1 + --v2e-repeat`` times: whole-process figures (imports, warm-up, first run) and the best
+   warm run (v2e's first run counts too, in its favour).
+
 Peak memory of a fresh process streaming a sequence, and one 4× as long, to HDF5 is reported last.
 
 Run: ``python benchmarks/bench_events.py [--size 256] [--keyframes 100] [--repeat 3]``
@@ -33,6 +41,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import time
 from pathlib import Path
 
@@ -323,13 +332,172 @@ def streaming_memory(size: int, lengths: tuple[int, ...], rate_hz: float) -> lis
     return rows
 
 
+#: The venv holding v2e's dependencies (CPU torch) and its ``v2ecore`` sources under ``src/`` (see
+#: :func:`run_v2e`); the v2e section is skipped when it is absent.
+V2E_VENV = Path(os.environ.get("SIMSPAD_V2E_VENV", "/work/venvs/v2e"))
+
+# Runs in the v2e venv. v2e's emulator module imports GUI and file-output helpers at module level (screeninfo,
+# easygui, tkinter, dv_processing, engineering_notation) that emulation never calls; empty stand-ins are put in
+# sys.modules only where a package is missing, so the emulator itself runs unmodified.
+_V2E_CHILD = r"""
+import json, os, resource, sys, time, types
+t_process = time.perf_counter()
+for name, attrs in {"screeninfo": {"get_monitors": lambda: []}, "easygui": {}, "dv_processing": {},
+                    "engineering_notation": {"EngNumber": lambda x, *a, **k: str(x)}}.items():
+    try:
+        __import__(name)
+    except ImportError:
+        sys.modules[name] = types.SimpleNamespace(**attrs)
+try:
+    from tkinter import filedialog
+except ImportError:
+    sys.modules["tkinter"] = types.SimpleNamespace(filedialog=None)
+import numpy as np
+import torch
+torch.set_num_threads(int(sys.argv[3]))
+from v2ecore.emulator import EventEmulator
+args = json.loads(sys.argv[2])
+data = np.load(sys.argv[1])
+times, frames = data["times_s"], data["frames_dn"]
+
+def run():
+    emu = EventEmulator(pos_thres=args["threshold_on"], neg_thres=args["threshold_off"],
+                        sigma_thres=args["threshold_sigma"], cutoff_hz=args["cutoff_hz"],
+                        leak_rate_hz=args["leak_rate_hz"], refractory_period_s=args["refractory_s"],
+                        shot_noise_rate_hz=args["shot_noise_rate_hz"], seed=0, device="cpu")
+    n = 0
+    for t, frame in zip(times, frames):
+        ev = emu.generate_events(frame, float(t))
+        if ev is not None:
+            n += len(ev)
+    return n
+
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+c0, w0 = cpu(), time.perf_counter()
+n_first = run()  # the first run in this process: torch's own warm-up included
+c1, w1 = cpu(), time.perf_counter()
+best = (w1 - w0, c1 - c0)  # v2e's steady state: the best run, the first included (favours v2e)
+for _ in range(int(sys.argv[4])):
+    w, c = time.perf_counter(), cpu()
+    n = run()
+    best = (min(best[0], time.perf_counter() - w), min(best[1], cpu() - c))
+print(json.dumps({"n_events": n_first, "wall_s": best[0], "cpu_s": best[1],
+                  "process_wall_s": w1 - t_process, "process_cpu_s": c1}))
+"""
+
+# Runs in this interpreter, fresh: SimSPAD's counterpart of the v2e child (numba kernels from the on-disk cache).
+_SIMSPAD_CHILD = r"""
+import json, resource, sys, time
+t_process = time.perf_counter()
+import numpy as np
+sys.path.insert(0, sys.argv[3])
+import bench_events as b
+from simspad.radiance.timeline import Timeline
+from simspad.sensors.presets import EventParams
+data = np.load(sys.argv[1])
+tl = Timeline.from_arrays(data["times_s"], data["frames"], scale=float(data["scale"]))
+lux = float(sys.argv[2])
+
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+c0, w0 = cpu(), time.perf_counter()
+n_first = b.simspad_events(tl, EventParams(), lux)[0].size
+c1, w1 = cpu(), time.perf_counter()
+best = (np.inf, np.inf)  # SimSPAD's steady state: the best warm run
+for _ in range(int(sys.argv[4])):
+    w, c = time.perf_counter(), cpu()
+    n = b.simspad_events(tl, EventParams(), lux)[0].size
+    assert n == n_first  # same seed, same events
+    best = (min(best[0], time.perf_counter() - w), min(best[1], cpu() - c))
+print(json.dumps({"n_events": n_first, "wall_s": best[0], "cpu_s": best[1],
+                  "process_wall_s": w1 - t_process, "process_cpu_s": c1, "first_wall_s": w1 - w0,
+                  "first_cpu_s": c1 - c0}))
+"""
+
+
+def v2e_inputs(tl: Timeline, params: EventParams, lux: float) -> tuple[np.ndarray, dict]:
+    """The keyframes as v2e takes them, and v2e's parameters matched to ``params``.
+
+    v2e maps its input (8-bit DN by design) through ``lin_log``: linear below 20 DN, ``ln`` above. The
+    photocurrent is scaled so that its smallest value is 20 DN, so every pixel is on the log branch and v2e sees
+    ``ln I`` plus a constant, like SimSPAD (no clipping: v2e works in float). Thresholds, their spread, the
+    photoreceptor's bright-light cutoff, leak rate and refractory period are the preset's; v2e's shot-noise rate is
+    one number per sensor, set to SimSPAD's mean rate over the pixels at this lux.
+    """
+    current = np.stack([events.sensor_photocurrent_e_s(tl.keyframe(i), params) for i in range(tl.times_s.size)])
+    frames_dn = (current * (20.0 / current.min())).astype(np.float32)
+    current_1lux = events.sensor_current_1lux_e_s(float(tl.keyframe(0).mean()), lux, params)
+    shot = shot_noise_rate_hz(current[0], current_1lux, params.shot_noise_rate_hz_at_1lux,
+                              params.shot_noise_current_exponent)
+    matched = {"threshold_on": params.threshold_on, "threshold_off": params.threshold_off,
+               "threshold_sigma": params.threshold_sigma, "cutoff_hz": params.photoreceptor_cutoff_hz_max,
+               "leak_rate_hz": params.leak_rate_hz, "refractory_s": params.refractory_s,
+               "shot_noise_rate_hz": float(np.mean(shot))}
+    return frames_dn, matched
+
+
+def run_v2e(tl: Timeline, params: EventParams, lux: float, threads: int, repeat: int = 1) -> dict | None:
+    """v2e's ``EventEmulator`` (torch, CPU) on the keyframes of ``tl``, in a fresh process of the v2e venv, and
+    SimSPAD (``threads`` numba threads) in a fresh process of this interpreter on the same keyframes.
+
+    v2e runs once with one torch thread and once with ``threads``, and its faster run is kept: torch's many small
+    parallel regions per frame can lose more to thread hand-offs than they gain on a busy machine.
+
+    Each child runs its simulator ``1 + repeat`` times: the first run includes the warm-up of a new process
+    (imports, torch's first calls, numba's cache load); the steady state is the best of the others (for v2e, the
+    best of all, its first run included). Returns ``{"v2e": {...}, "simspad": {...}}``
+    (events, wall and CPU time of each), or None when the venv is absent.
+    """
+    import json
+    import subprocess
+    import sys
+    import tempfile
+
+    python = V2E_VENV / "bin" / "python"
+    if not python.exists() or not (V2E_VENV / "src" / "v2ecore" / "emulator.py").exists():
+        return None
+    frames_dn, matched = v2e_inputs(tl, params, lux)
+    flux = np.stack([tl.keyframe(i) for i in range(tl.times_s.size)])
+    env = {**os.environ, "PYTHONPATH": str(V2E_VENV / "src")}
+    with tempfile.TemporaryDirectory() as tmp:
+        inputs = Path(tmp) / "keyframes.npz"
+        np.savez(inputs, times_s=tl.times_s, frames_dn=frames_dn, frames=flux.astype(np.float32), scale=1.0)
+        out = {}
+        for n_threads in sorted({1, threads}):
+            env["OMP_NUM_THREADS"] = str(n_threads)
+            done = subprocess.run([str(python), "-c", _V2E_CHILD, str(inputs), json.dumps(matched), str(n_threads),
+                                   str(repeat)], capture_output=True, text=True, env=env, cwd=tmp, check=False)
+            if done.returncode != 0:
+                raise RuntimeError(f"v2e child failed:\n{done.stderr[-3000:]}")
+            run = json.loads(done.stdout.strip().splitlines()[-1]) | {"threads": n_threads}
+            if "v2e" not in out or run["wall_s"] < out["v2e"]["wall_s"]:
+                out["v2e"] = run
+        env_s = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+        done = subprocess.run([sys.executable, "-c", _SIMSPAD_CHILD, str(inputs), str(lux),
+                               str(Path(__file__).parent), str(repeat)], capture_output=True, text=True, env=env_s,
+                              check=False)
+        if done.returncode != 0:
+            raise RuntimeError(f"SimSPAD child failed:\n{done.stderr[-3000:]}")
+        out["simspad"] = json.loads(done.stdout.strip().splitlines()[-1])
+    out["matched"] = matched
+    return out
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=256, help="sensor width = height, pixels")
     parser.add_argument("--keyframes", type=int, default=100)
     parser.add_argument("--rate", type=float, default=1000.0, help="keyframe rate, Hz")
     parser.add_argument("--lux", type=float, default=1000.0)
+    parser.add_argument("--flow", type=float, default=0.5, help="image motion per keyframe, pixels")
     parser.add_argument("--repeat", type=int, default=3, help="runs per contender; the fastest is reported")
+    parser.add_argument("--wp", action=argparse.BooleanOptionalAction, default=True,
+                        help="run the work-precision comparison (2.)")
     parser.add_argument("--wp-size", type=int, default=128, help="work-precision scene width = height, pixels")
     parser.add_argument("--wp-keyframes", type=int, default=21)
     parser.add_argument("--wp-lux", type=float, nargs="+", default=[10.0, 100.0, 1000.0],
@@ -339,9 +507,12 @@ def main(argv=None):
     parser.add_argument("--memory", action=argparse.BooleanOptionalAction, default=True,
                         help="also measure peak memory while streaming a sequence and one 4x as long")
     parser.add_argument("--memory-size", type=int, default=128)
+    parser.add_argument("--v2e", action=argparse.BooleanOptionalAction, default=True,
+                        help=f"also run v2e's EventEmulator on the same keyframes (needs the venv {V2E_VENV})")
+    parser.add_argument("--v2e-repeat", type=int, default=2, help="warm runs per fresh process in the v2e section")
     args = parser.parse_args(argv)
     params = EventParams()
-    tl = make_timeline(args.size, args.keyframes, args.rate, args.lux)
+    tl = make_timeline(args.size, args.keyframes, args.rate, args.lux, flow_px=args.flow)
     duration = tl.t_end - tl.t_start
 
     small = make_timeline(16, 4, args.rate, args.lux)  # warm-up: numba compile / cache load, NumPy first calls
@@ -356,7 +527,8 @@ def main(argv=None):
     n_s, wall_s, cpu_s = runs_s[0][0], best(runs_s, 1), best(runs_s, 2)
     n_k, wall_k, cpu_k = runs_n[0][0], best(runs_n, 1), best(runs_n, 2)
     kf = args.keyframes - 1
-    print(f"1. same input: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz "
+    print(f"1. same input: {args.size}x{args.size} px, {args.keyframes} keyframes at {args.rate:g} Hz, "
+          f"{args.flow:g} px per keyframe "
           f"({duration * 1e3:.0f} ms), {args.lux:g} lx, full model; simspad on {numba.get_num_threads()} numba "
           f"thread(s) (NUMBA_NUM_THREADS), NumPy reference single-threaded; best of {args.repeat} alternating runs")
     print(f"{'run':<22}{'wall s':>8}{'cpu s':>8}{'events':>10}{'events/s':>10}{'ev/cpu-s':>10}{'kf/s':>8}"
@@ -366,9 +538,36 @@ def main(argv=None):
               f"{kf / cpu:>9.1f}")
     print(f"speed-up (same input, different accuracy): {wall_k / wall_s:.2f}x wall, {cpu_k / cpu_s:.2f}x CPU time")
 
+    if args.v2e:
+        v2e = run_v2e(tl, params, args.lux, numba.get_num_threads(), args.v2e_repeat)
+        if v2e is None:
+            print(f"1b. v2e: skipped (no venv with torch and v2ecore sources at {V2E_VENV})")
+        else:
+            print(f"1b. v2e's EventEmulator (torch CPU, {v2e['v2e']['threads']} thread(s), the faster of 1 and "
+                  f"{numba.get_num_threads()}) and SimSPAD ({numba.get_num_threads()} numba thread(s)), each in a "
+                  "fresh process on the same keyframes; v2e matched: " +
+                  ", ".join(f"{k}={v:g}" for k, v in v2e["matched"].items()))
+            print(f"{'run':<22}{'events':>10}{'wall s':>8}{'cpu s':>8}{'events/s':>10}{'ev/cpu-s':>10}"
+                  f"{'process wall s':>16}{'process cpu s':>15}")
+            for name in ("simspad", "v2e"):
+                r = v2e[name]
+                print(f"{name:<22}{r['n_events']:>10d}{r['wall_s']:>8.3f}{r['cpu_s']:>8.3f}"
+                      f"{r['n_events'] / r['wall_s']:>10.3g}{r['n_events'] / r['cpu_s']:>10.3g}"
+                      f"{r['process_wall_s']:>16.3f}{r['process_cpu_s']:>15.3f}")
+            mine, theirs = v2e["simspad"], v2e["v2e"]
+            rate = lambda r, key: r["n_events"] / r[key]
+            print(f"SimSPAD / v2e events per second: {rate(mine, 'wall_s') / rate(theirs, 'wall_s'):.2f}x wall, "
+                  f"{rate(mine, 'cpu_s') / rate(theirs, 'cpu_s'):.2f}x CPU time (best warm run of each process); "
+                  f"whole process (imports and first run): "
+                  f"{rate(mine, 'process_wall_s') / rate(theirs, 'process_wall_s'):.2f}x wall, "
+                  f"{rate(mine, 'process_cpu_s') / rate(theirs, 'process_cpu_s'):.2f}x CPU time")
+            print(f"SimSPAD warm-up of a fresh process (first run minus a warm run): "
+                  f"{mine['first_wall_s'] - mine['wall_s']:.2f} s wall, "
+                  f"{mine['first_cpu_s'] - mine['cpu_s']:.2f} s CPU")
+
     window_s = 100e-6
     results = {}
-    for lux in args.wp_lux:
+    for lux in args.wp_lux if args.wp else ():
         rows, speedups = results[lux] = work_precision(args.wp_size, args.wp_keyframes, args.rate, lux, window_s,
                                                        args.repeat)
         print(f"2. work-precision at {lux:g} lx: {args.wp_size}x{args.wp_size} px, {args.wp_keyframes} keyframes, "
@@ -380,7 +579,7 @@ def main(argv=None):
         for name, (ratio, bound) in speedups.items():
             print(f"speed-up at equal accuracy ({lux:g} lx, simspad default substep_tolerance "
                   f"{DEFAULT_TOLERANCE:g}) vs {name}: {'>' if bound else ''}{ratio:.1f}x CPU time")
-    if args.plot:
+    if args.plot and results:
         plot_work_precision(results, args.wp_size, args.wp_keyframes, window_s, args.plot)
         print(f"work-precision diagram: {args.plot}")
     if args.memory:

@@ -94,7 +94,11 @@ def test_static_scene_gives_only_noise_whose_rate_rises_as_light_falls(tmp_path)
         # leak: ON events at each pixel's own rate (reference drift leak·θ_on per second)
         leak = _per_pixel(ev, (H, W), ev["label"] == events.LABEL_LEAK)
         assert np.all(ev["p"][ev["label"] == events.LABEL_LEAK] == 1)
-        assert np.mean(leak == np.floor(T * maps.leak_rate_hz)) > 0.97
+        # steady state: a uniform leak phase gives floor(T·r) or that + 1 events, T·r on average
+        n_leak = T * maps.leak_rate_hz
+        assert np.mean((leak == np.floor(n_leak)) | (leak == np.floor(n_leak) + 1)) > 0.97
+        frac = n_leak % 1
+        assert abs(leak.sum() - n_leak.sum()) < 5 * np.sqrt(np.sum(frac * (1 - frac))) + 0.01 * n_leak.sum()
         # hot pixels: Poisson at the hot rate thinned by the dead time after each event
         hot = _per_pixel(ev, (H, W), ev["label"] == events.LABEL_HOT)
         is_hot = maps.hot_rate_hz > 0
@@ -104,6 +108,43 @@ def test_static_scene_gives_only_noise_whose_rate_rises_as_light_falls(tmp_path)
         assert abs(hot.sum() - expected_hot) < 5 * np.sqrt(expected_hot)
     assert shot_counts[0] > shot_counts[1] > shot_counts[2]
     assert shot_counts[0] > 5 * shot_counts[2]
+
+
+def test_short_static_recording_has_leak_events_at_the_steady_state_rate(tmp_path):
+    """20 ms of a static scene with the preset's leak rate (a period of ≈ 10 s): each pixel fires with probability
+    T·r, so the recording holds Σ T·r leak events, not none (a reference reset at the start would give none)."""
+    H, W, T = 256, 256, 0.02
+    params = EventParams(**{**QUIET, "leak_rate_hz": EventParams().leak_rate_hz})
+    ev, _, maps = _run(tmp_path, [0.0, T], np.full((2, H, W), 1e17), params, seed=11)
+    p_fire = T * maps.leak_rate_hz
+    expected = p_fire.sum()
+    assert expected > 100
+    n_leak = int(np.sum(ev["label"] == events.LABEL_LEAK))
+    assert n_leak == ev["t"].size, "a quiet static scene gives leak events only"
+    # each pixel fires at most once (Bernoulli T·r): 5 σ of the sum
+    assert abs(n_leak - expected) < 5 * np.sqrt(np.sum(p_fire * (1 - p_fire))), (n_leak, expected)
+
+
+def test_leak_phase_is_uniform_not_locked_to_the_recording_start(tmp_path):
+    """Each pixel's first leak event comes at u/r after the start, u uniform on (0, 1] (KS test), and later ones
+    every 1/r: the sensor starts in its steady state."""
+    H, W, T = 32, 32, 1.0
+    params = EventParams(**{**QUIET, "leak_rate_hz": 5.0})
+    ev, _, maps = _run(tmp_path, [0.0, T], np.full((2, H, W), 1e17), params, seed=12)
+    assert np.all(ev["label"] == events.LABEL_LEAK) and np.all(ev["p"] == 1)
+    idx = ev["y"].astype(np.int64) * W + ev["x"]
+    order = np.lexsort((ev["t"], idx))
+    idx, t_s = idx[order], ev["t"][order] * 1e-6
+    first = np.r_[True, np.diff(idx) != 0]
+    full = np.flatnonzero(maps.leak_rate_hz * T >= 1.0)  # pixels whose first event must fall inside [0, T)
+    assert full.size > 0.9 * H * W and np.all(np.isin(full, idx[first]))
+    keep = np.isin(idx[first], full)
+    phase = t_s[first][keep] * maps.leak_rate_hz[idx[first][keep]]
+    assert stats.kstest(phase, "uniform").pvalue > 1e-3
+    # later events follow at the pixel's period (to the µs floor of the timestamps)
+    gaps = np.diff(t_s)[~first[1:]]
+    period = 1.0 / maps.leak_rate_hz[idx[1:][~first[1:]]]
+    assert gaps.size > 1000 and np.all(np.abs(gaps - period) <= 1.0001e-6)
 
 
 def test_refractory_period_is_respected_and_throttles_fast_changes(tmp_path):

@@ -10,7 +10,8 @@ changing ones take one step per keyframe interval; cost follows what changes. In
 Randomness: one splitmix64 stream per pixel (:mod:`simspad.physics.rng`), seeded from the sensor's ``rng``, so the
 result does not depend on chunking, on the pixel blocks or on the thread count; jitter draws are normal quantiles
 of one uniform each (Acklam's approximation, relative error < 1.2·10⁻⁹). Draw order per pixel: at start the shot
-and hot hazards; at a noise event its next hazard then its polarity; then at every event its jitter.
+and hot hazards and the leak phase; at a noise event its next hazard then its polarity; then at every event its
+jitter.
 
 Cost: an internal step costs one exp and no log (a step cut by the tolerance rule advances ln I by a per-pixel
 constant; ln I at keyframes is taken once per pixel and keyframe); a crossing costs about two exp (Halley
@@ -131,17 +132,25 @@ class Blocks(NamedTuple):
 
 
 @numba.njit(cache=True)
-def init_state(current0, t0, state):
-    """Settle every pixel at photocurrent ``current0`` (e⁻ s⁻¹) at instant ``t0`` (s): photoreceptor output and
-    reference at ln I, no blind time, and the first shot and hot hazards drawn (in that order)."""
+def init_state(current0, t0, leak_rate_hz, state):
+    """Settle every pixel at photocurrent ``current0`` (e⁻ s⁻¹) at instant ``t0`` (s) in its steady state:
+    photoreceptor output and reference at ln I, no blind time, the first shot and hot hazards drawn, then the
+    leak phase (in that order).
+
+    A sensor that has been running is at a random point of each pixel's leak cycle, so the last reset is placed
+    ``(1 − u)/leak_rate_hz[p]`` before ``t0`` (u uniform on (0, 1]): the drift already accumulated is
+    ``(1 − u)·θ_on`` and the first leak event of a static pixel comes ``u/leak_rate_hz[p]`` after ``t0``,
+    uniform over one leak period. A reference reset at ``t0`` would phase-lock every pixel's leak events to the
+    recording's start (none before one leak period)."""
     for p in range(current0.size):
         state.log_output[p] = math.log(max(current0[p], MIN_CURRENT_E_S))
         state.reference[p] = state.log_output[p]
-        state.t_reference_s[p] = t0
         state.t_available_s[p] = -np.inf
         s = state.rng_state[p]
         s, state.shot_hazard[p] = exponential(s)
         s, state.hot_hazard[p] = exponential(s)
+        s, u = uniform_positive(s)
+        state.t_reference_s[p] = t0 - (1.0 - u) / leak_rate_hz[p] if leak_rate_hz[p] > 0.0 else t0
         state.rng_state[p] = s
 
 

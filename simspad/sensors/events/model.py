@@ -12,8 +12,9 @@ Per pixel (flattened index ``y·W + x``):
 - **thresholds** ``θ ~ N(nominal, threshold_sigma)`` per pixel and polarity, fixed for the recording, clamped to
   ``≥ threshold_min`` (> 0);
 - **leak**: the reference drifts down at ``leak_rate·θ_on`` per second (log-normal per-pixel rate, median
-  ``leak_rate_hz``): a static pixel emits ON events at that rate. An ON event whose change since the last reset
-  owes more to the drift than to the light is labelled leak (2);
+  ``leak_rate_hz``): a static pixel emits ON events at that rate. The sensor starts in its steady state, each
+  pixel at a uniformly random phase of its leak cycle, so leak events come at that rate from the first instant.
+  An ON event whose change since the last reset owes more to the drift than to the light is labelled leak (2);
 - **shot noise** (label 1): a Poisson process of random polarity with rate ``r(I) = r₁·(I₁/I)^γ``, where ``I₁`` is
   the photocurrent of a pixel seeing the scene's mean luminance at 1 lx (plus dark current) and
   ``r₁ = shot_noise_rate_hz_at_1lux``. Graça & Delbruck (2021) explain why DVS noise rises as light falls: the

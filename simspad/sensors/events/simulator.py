@@ -64,7 +64,8 @@ class EventSimulator:
     params : EventParams
     shape : (H, W)
     current0 : ndarray [H·W]
-        Photocurrent at ``t0`` (e⁻ s⁻¹); the photoreceptor starts settled there, the reference equal to it.
+        Photocurrent at ``t0`` (e⁻ s⁻¹); the photoreceptor starts settled there, the reference equal to it and
+        each pixel's leak phase drawn from its steady state (uniform over one leak period).
     t0 : float
         Start instant, s.
     current_1lux : float
@@ -80,7 +81,8 @@ class EventSimulator:
         self.maps = maps
         self.model = model_constants(params, current_1lux)
         self.state = PixelState.empty(maps.rng_state)
-        init_state(np.ascontiguousarray(current0, dtype=np.float64).ravel(), float(t0), self.state)
+        init_state(np.ascontiguousarray(current0, dtype=np.float64).ravel(), float(t0), maps.leak_rate_hz,
+                   self.state)
         self._pending = EventColumns.empty(0)
         self._cap = max(1 << 16, 4 * n)  # events expected per chunk (adapts; an overflowing block is rerun)
         self._buf = EventBuffer.empty(0)
