@@ -348,3 +348,21 @@ def test_recording_holds_the_chunker_bins_when_chunks_do_not_align(tmp_path, mon
     with open_recording(tmp_path / "r.h5") as rec:
         stored = rec.spad._dataset("bits")[()]
     assert expected.any() and np.array_equal(stored, expected)
+
+
+def test_sparse_sampler_pixels_of_one_byte_keep_their_own_rates():
+    """Sparse bytes draw candidates at the byte's largest rate and thin them per pixel: within every byte the
+    columns' Λ span 0.0005–0.07 (all below the sparse threshold), yet each pixel's count follows its own
+    Binomial (χ²); giving every pixel its byte's mean probability is rejected by the same bound."""
+    h, w, n = 32, 64, 20_000
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    q = p.detection_area_m2
+    lam = np.geomspace(5e-4, 0.07, 8)[np.arange(w) % 8]
+    flux = np.broadcast_to(lam / (q * BIN_S), (h, w)).astype(np.float32)
+    tl = Timeline.from_arrays([0.0, 1.0], np.stack([flux, flux]))
+    counts = _counts(SpadChunker(tl, 0.0, n, p, np.zeros((h, w), np.float32), np.random.default_rng(9)), n, w)
+    expected = np.broadcast_to(-np.expm1(-q * BIN_S * flux.astype(np.float64)), (h, w))
+    stat, dof, bound = _chi2_ok(counts, expected, n)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    byte_mean = np.repeat(expected.reshape(h, w // 8, 8).mean(axis=2), 8, axis=1)
+    assert _chi2_ok(counts, byte_mean, n)[0] > 3 * bound
