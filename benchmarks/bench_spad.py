@@ -34,9 +34,8 @@ import time
 import tracemalloc
 from pathlib import Path
 
-import numpy as np
-
 import h5py
+import numpy as np
 
 from simspad.io.recording import RecordingWriter
 from simspad.radiance.timeline import Timeline
