@@ -10,7 +10,8 @@ probability bound p_max (the flux is piecewise linear, so its bounds sit on keyf
   candidate slots; geometric skips between candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one
   exponential draw per candidate) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
   and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
-  terminating draw per byte: dark scenes cost almost nothing;
+  terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
+  among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel;
 - *dense*: bin by bin, one uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
   multiplication per bin inside a linear piece (Λ is affine in k there); the byte is assembled in a register.
 
@@ -231,39 +232,48 @@ def spad_chunk(out, layout, response, seed):
                 continue
             if hi_byte <= 0.0:
                 continue
-            # sparse: candidate slots s = 8·k + bit over the byte's 8 pixels × m bins at the byte's largest rate
+            # sparse: candidate slots over the byte's 8 pixels × m bins (s = 8·k + bit) at the byte's largest rate,
+            # or pixel by pixel (s = k) where one bright pixel (a hot one) would make the joint candidates dearer
+            sum_hi = 0.0
             for bit in range(8):
                 lo = lam_lo[bit]
                 lo_bound[bit] = lo * (1.0 - 0.5 * lo)  # 1 − e^(−Λ) ≥ Λ − Λ²/2: a lower bound of every p_k
-            p_max = -math.expm1(-hi_byte)
-            inv_lam = 1.0 / hi_byte
-            n_slots = 8 * m
-            s = np.int64(-1)
-            while True:
-                state, u = uniform(state)
-                skip = -math.log(1.0 - u) * inv_lam
-                if skip >= n_slots - 1 - s:
-                    break
-                s += 1 + np.int64(skip)
-                k = s >> 3
-                bit = s & 7
-                # thinning: keep with p_k / p_max; p_k ≤ Λ_k ≤ lam_hi rejects most of a dim pixel's candidates,
-                # the squeeze accepts most of the others without evaluating p_k
-                state, u = uniform(state)
-                up = u * p_max
-                if up >= lam_hi[bit]:
+                sum_hi += lam_hi[bit]
+            joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0  # expected draws: candidates + terminations
+            for g in range(1 if joint else x_end):
+                rate = hi_byte if joint else lam_hi[g]
+                if rate <= 0.0:
                     continue
-                x = 8 * xb + bit
-                if up >= lo_bound[bit]:
-                    lam = _lam(layout, k, y, x, q_gate, float(dcr[y, x]) * gate_s)
-                    if up >= -math.expm1(-lam):
+                p_max = -math.expm1(-rate)
+                inv_lam = 1.0 / rate
+                n_slots = 8 * m if joint else m
+                s = np.int64(-1)
+                while True:
+                    state, u = uniform(state)
+                    skip = -math.log(1.0 - u) * inv_lam
+                    if skip >= n_slots - 1 - s:
+                        break
+                    s += 1 + np.int64(skip)
+                    k = s >> 3 if joint else s
+                    bit = s & 7 if joint else g
+                    # thinning: keep with p_k / p_max; p_k ≤ Λ_k ≤ lam_hi rejects most of a dim pixel's
+                    # candidates, the squeeze accepts most of the others without evaluating p_k
+                    state, u = uniform(state)
+                    up = u * p_max
+                    if up >= lam_hi[bit]:
                         continue
-                out[y, k, xb] |= np.uint8(1 << bit)
-                ap_left, ct_left = countdown
-                if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
-                    state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape, response)
-                else:
-                    countdown = (ap_left - 1, ct_left - 4)
+                    x = 8 * xb + bit
+                    if up >= lo_bound[bit]:
+                        lam = _lam(layout, k, y, x, q_gate, float(dcr[y, x]) * gate_s)
+                        if up >= -math.expm1(-lam):
+                            continue
+                    out[y, k, xb] |= np.uint8(1 << bit)
+                    ap_left, ct_left = countdown
+                    if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
+                        state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape,
+                                                                 response)
+                    else:
+                        countdown = (ap_left - 1, ct_left - 4)
     # blocks of dense bytes run through all bins while their state stays in L1 cache
     bin_run = layout.bin_run
     z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
