@@ -33,8 +33,8 @@ import numpy as np
 from simspad.physics.rng import geometric, next_u64, uniform
 
 #: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
-#: dense (one uniform per bin) from it on. Near the crossover measured by benchmarks/bench_spad.py (a sparse
-#: detection costs ~15× a dense bin).
+#: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
+#: benchmarks/bench_spad.py (a sparse detection costs ≈ 15× a dense bin; 0.02 and 0.05 were no faster).
 SPARSE_MAX_PROBABILITY = 0.08
 # The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
 _S32 = np.uint64(32)
