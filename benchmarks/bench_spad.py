@@ -1,14 +1,21 @@
-"""SPAD simulation throughput against a naive NumPy reference, and streaming memory.
+"""SPAD simulation throughput against a naive NumPy reference (HDF5 write included), storage filters, warm-up
+and streaming memory.
 
 Run: ``python benchmarks/bench_spad.py [--size 512] [--duration-ms 10] [--quick]``
 
 1. Throughput: a 512×512 textured scene whose brightness varies in time (keyframes every 1 ms, as the renderer's
    minimum rate), scaled so that the mean detection probability per bin spans ~0.1 % … ~90 %. For each level,
-   SimSPAD's kernel (:class:`simspad.sensors.spad.SpadChunker`, afterpulsing and crosstalk on) and a naive
-   reference (one uniform number per pixel per bin compared with the exact per-bin probability, then packed, in
-   NumPy) generate the same bins in the same process. Printed: Gbit/s of each, the ratio, and the real-time factor
-   against the SwissSPAD2 (512×512 at 97.7 kHz = 25.6 Gbit/s).
-2. Streaming memory: :func:`simspad.sensors.spad.simulate_spad` writes real HDF5 recordings of 1× and 4× the
+   SimSPAD (:func:`simspad.sensors.spad.simulate_spad` into a real recording through
+   :class:`~simspad.io.recording.RecordingWriter`, afterpulsing and crosstalk on) and a naive reference (one
+   uniform number per pixel per bin compared with the exact per-bin probability, packed in NumPy and written to
+   an uncompressed HDF5 dataset with h5py) produce the same bins in the same process. Printed: Gbit/s of each
+   (process CPU time, file written and closed), the ratio, and the real-time factor against the SwissSPAD2
+   (512×512 at 97.7 kHz = 25.6 Gbit/s).
+2. Storage filters: the packed bits of one streamed chunk at P(1) = 0.001 and 0.05 written with each candidate
+   HDF5 filter (none, lzf, gzip, and Blosc2 + bit-shuffle from ``hdf5plugin`` when it is installed): size,
+   write and read speed.
+3. Warm-up: a fresh Python process imports the simulator and runs a tiny chunk (numba's on-disk cache).
+4. Streaming memory: :func:`simspad.sensors.spad.simulate_spad` writes real HDF5 recordings of 1× and 4× the
    duration in fresh subprocesses; their peak resident memory (``ru_maxrss``) and the traced NumPy peak
    (``tracemalloc``) must not grow with the duration.
 """
@@ -27,11 +34,13 @@ import time
 import tracemalloc
 from pathlib import Path
 
+import h5py
 import numpy as np
 
+from simspad.io.recording import RecordingWriter
 from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import SpadParams
-from simspad.sensors.spad import SpadChunker, chunk_bins, pack_bits
+from simspad.sensors.spad import SpadChunker, chunk_bins, h5_chunk_bins, pack_bits, simulate_spad
 
 SWISSSPAD2_GBIT_S = 512 * 512 / 10.24e-6 / 1e9  # 25.6
 
@@ -84,41 +93,111 @@ def count_ones(packed: np.ndarray) -> int:
     return int(np.unpackbits(packed).sum())
 
 
+def _simspad_to_h5(tl: Timeline, duration_s: float, params: SpadParams, path: str) -> float:
+    """CPU seconds of :func:`simulate_spad` writing a complete recording (closed and renamed)."""
+    size = tl.width
+    c = time.process_time()
+    with RecordingWriter(path, {"width": size, "height": tl.height, "duration_s": duration_s, "lux": 1.0}) as w:
+        simulate_spad(w, tl, 0.0, duration_s, params, np.random.default_rng(1))
+    return time.process_time() - c
+
+
+def _naive_to_h5(tl: Timeline, n: int, params: SpadParams, dcr: np.ndarray, path: str) -> tuple[float, np.ndarray]:
+    """CPU seconds of the naive reference writing its packed bits to an uncompressed HDF5 dataset."""
+    size = tl.width
+    m = chunk_bins(size, size)
+    ref = SpadChunker(tl, 0.0, n, params, dcr, np.random.default_rng(2))
+    rng = np.random.default_rng(3)
+    c = time.process_time()
+    with h5py.File(path, "w") as f:
+        ds = f.create_dataset("bits", (n, tl.height, (size + 7) // 8), np.uint8,
+                              chunks=(h5_chunk_bins(tl.height, size), tl.height, (size + 7) // 8))
+        for k0 in range(0, n, m):
+            ref_buf = naive_chunk(ref, k0, min(m, n - k0), rng)
+            ds[k0 : k0 + ref_buf.shape[0]] = ref_buf
+    return time.process_time() - c, ref_buf
+
+
 def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]:
     params = SpadParams(gate_s=10.24e-6)
     duration_s = duration_ms * 1e-3
-    n = int(duration_s / params.bin_s)
     rows = []
-    warm = SpadChunker(scene(32, 0.002, 0.1, params), 0.0, 100, params, np.zeros((32, 32), np.float32),
-                       np.random.default_rng(0))
-    warm.chunk(0, 100)  # numba compile/cache load outside the timings
-    for level in levels:
-        tl = scene(size, duration_s, level, params)
-        dcr = np.full((size, size), 7.5, np.float32)
-        m = chunk_bins(size, size)
-        fast = SpadChunker(tl, 0.0, n, params, dcr, np.random.default_rng(1))
-        t, c = time.perf_counter(), time.process_time()
-        buf = None
-        for k0 in range(0, n, m):
-            mm = min(m, n - k0)
-            buf = fast.chunk(k0, mm, buf if buf is not None and buf.shape[0] == mm else None)
-        t_fast, c_fast = time.perf_counter() - t, time.process_time() - c
-        ones_fast = count_ones(buf)
-        ref = SpadChunker(tl, 0.0, n, params, dcr, np.random.default_rng(2))
-        rng = np.random.default_rng(3)
-        t, c = time.perf_counter(), time.process_time()
-        for k0 in range(0, n, m):
-            ref_buf = naive_chunk(ref, k0, min(m, n - k0), rng)
-        t_naive, c_naive = time.perf_counter() - t, time.process_time() - c
-        ones_naive = count_ones(ref_buf)
-        bits = n * size * size
-        # CPU time of this process: on a shared machine wall time also counts other people's jobs
-        gbit_fast, gbit_naive = bits / c_fast / 1e9, bits / c_naive / 1e9
-        rows.append(dict(level=level, p_fast=ones_fast / (buf.shape[0] * size * size),
-                         p_naive=ones_naive / (ref_buf.shape[0] * size * size), gbit_fast=gbit_fast,
-                         gbit_naive=gbit_naive, speedup=gbit_fast / gbit_naive, rtf=gbit_fast / SWISSSPAD2_GBIT_S,
-                         wall_speedup=t_naive / t_fast, wall_gbit_fast=bits / t_fast / 1e9))
+    with tempfile.TemporaryDirectory() as tmp:
+        _simspad_to_h5(scene(32, 0.002, 0.1, params), 0.002, params, f"{tmp}/warm.h5")  # numba cache load
+        for level in levels:
+            tl = scene(size, duration_s, level, params)
+            path = f"{tmp}/simspad_{level}.h5"
+            c_fast = _simspad_to_h5(tl, duration_s, params, path)
+            with h5py.File(path, "r") as f:
+                n = f["spad/bits"].shape[0]
+                tail = f["spad/bits"][-min(n, 256):]
+                dcr = f["spad/dcr_cps"][()]
+            c_naive, ref_tail = _naive_to_h5(tl, n, params, dcr, f"{tmp}/naive_{level}.h5")
+            ref_tail = ref_tail[-tail.shape[0]:]
+            bits = n * size * size
+            # CPU time of this process: on a shared machine wall time also counts other people's jobs
+            gbit_fast, gbit_naive = bits / c_fast / 1e9, bits / c_naive / 1e9
+            rows.append(dict(level=level, p_fast=count_ones(tail) / tail.size / 8,
+                             p_naive=count_ones(ref_tail) / ref_tail.size / 8, gbit_fast=gbit_fast,
+                             gbit_naive=gbit_naive, speedup=c_naive / c_fast, rtf=gbit_fast / SWISSSPAD2_GBIT_S,
+                             mb_fast=os.path.getsize(path) / 2**20))
     return rows
+
+
+# ------------------------------------------------------------------------------------------------ storage filters
+def filter_candidates() -> list[tuple[str, dict]]:
+    """HDF5 filters to compare: built-in ones, and Blosc2 from hdf5plugin when it is installed."""
+    rows = [("none", {}), ("lzf", {"compression": "lzf"}), ("gzip 1", {"compression": "gzip", "compression_opts": 1}),
+            ("gzip 4 + shuffle", {"compression": "gzip", "compression_opts": 4, "shuffle": True})]
+    try:
+        import hdf5plugin  # deferred: optional, only to measure what Blosc2 would cost
+    except ImportError:
+        return rows
+    for cname in ("lz4", "zstd"):
+        rows.append((f"blosc2 {cname} + bitshuffle",
+                     dict(hdf5plugin.Blosc2(cname=cname, clevel=5, filters=hdf5plugin.Blosc2.BITSHUFFLE))))
+    return rows
+
+
+def filters(size: int, levels: list[float]) -> list[dict]:
+    """Write one streamed chunk of packed bits per level with each filter; size, write and read speed."""
+    params = SpadParams(gate_s=10.24e-6)
+    m = chunk_bins(size, size)
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for level in levels:
+            tl = scene(size, m * params.bin_s + 2e-3, level, params)
+            packed = SpadChunker(tl, 0.0, m, params, np.full((size, size), 7.5, np.float32),
+                                 np.random.default_rng(4)).chunk(0, m)
+            for name, kwargs in filter_candidates():
+                path = f"{tmp}/f.h5"
+                c = time.process_time()
+                with h5py.File(path, "w") as f:
+                    f.create_dataset("bits", data=packed, chunks=(h5_chunk_bins(size, size), *packed.shape[1:]),
+                                     **kwargs)
+                c_write = time.process_time() - c
+                c = time.process_time()
+                with h5py.File(path, "r") as f:
+                    back = f["bits"][()]
+                c_read = time.process_time() - c
+                assert np.array_equal(back, packed)
+                mb = packed.nbytes / 2**20
+                out.append(dict(level=level, filter=name, ratio=packed.nbytes / os.path.getsize(path),
+                                file_mb=os.path.getsize(path) / 2**20, write_mb_s=mb / c_write,
+                                read_mb_s=mb / c_read))
+    return out
+
+
+def warm_up_seconds() -> float:
+    """Wall seconds of a fresh process importing the simulator and running one tiny chunk (numba cache hit)."""
+    code = ("import time; t = time.perf_counter(); import numpy as np; "
+            "from simspad.radiance.timeline import Timeline; from simspad.sensors.presets import SpadParams; "
+            "from simspad.sensors.spad import SpadChunker; "
+            "tl = Timeline.from_arrays([0.0, 1e-3], np.full((2, 16, 16), 1e15, np.float32)); "
+            "SpadChunker(tl, 0.0, 50, SpadParams(gate_s=10.24e-6), np.zeros((16, 16), np.float32), "
+            "np.random.default_rng(0)).chunk(0, 50); print(time.perf_counter() - t)")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(res.stdout.strip().splitlines()[-1])
 
 
 def lux_for_probability(p: float, params: SpadParams) -> float:
@@ -175,18 +254,27 @@ def main() -> None:
     levels = [0.001, 0.01, 0.05, 0.9] if args.quick else [0.001, 0.003, 0.01, 0.03, 0.05, 0.1, 0.3, 0.6, 0.9]
     params = SpadParams(gate_s=10.24e-6)
     print(f"SPAD throughput, {args.size}x{args.size}, {args.duration_ms:g} ms of 10.24 µs bins (gate = bin), "
-          f"keyframes every 1 ms, ±30 % temporal modulation; afterpulsing/crosstalk on in SimSPAD, off in naive")
+          f"keyframes every 1 ms, ±30 % temporal modulation; afterpulsing/crosstalk on in SimSPAD, off in naive; "
+          f"both write a complete HDF5 file")
     print("target P(1): mean detection probability per bin of the unmodulated scene; P SimSPAD / P naive: measured "
-          "over the last chunk (same bins, independent streams)")
+          "over the last 256 bins (same bins, independent streams)")
     print(f"{'target P(1)':>11} {'~lux':>8} {'P SimSPAD':>9} {'P naive':>8} {'SimSPAD Gbit/s':>15} "
-          f"{'naive Gbit/s':>13} "
-          f"{'speed-up':>9} {'× real time':>12} {'wall speed-up':>14} {'wall Gbit/s':>12}")
+          f"{'naive Gbit/s':>13} {'speed-up':>9} {'× real time':>12} {'file MB':>8}")
     for r in throughput(args.size, args.duration_ms, levels):
         print(f"{r['level']:11.3f} {lux_for_probability(r['level'], params):8.3g} {r['p_fast']:9.4f} "
               f"{r['p_naive']:8.4f} {r['gbit_fast']:15.2f} {r['gbit_naive']:13.3f} {r['speedup']:8.1f}× "
-              f"{r['rtf']:12.3f} {r['wall_speedup']:13.1f}× {r['wall_gbit_fast']:12.2f}")
-    print(f"(Gbit/s from process CPU time, single thread; real-time factor against SwissSPAD2 "
-          f"{SWISSSPAD2_GBIT_S:.1f} Gbit/s; ~lux = mid-grey scene illuminance for that mean P(1) at f/2)")
+              f"{r['rtf']:12.3f} {r['mb_fast']:8.1f}")
+    print(f"(Gbit/s from process CPU time, single thread, HDF5 write and close included on both sides; real-time "
+          f"factor against SwissSPAD2 {SWISSSPAD2_GBIT_S:.1f} Gbit/s; ~lux = mid-grey scene illuminance for that "
+          f"mean P(1) at f/2)")
+    print(f"\nStorage filters: one streamed chunk of packed bits ({chunk_bins(args.size, args.size)} bins of "
+          f"{args.size}x{args.size}), HDF5 chunks of {h5_chunk_bins(args.size, args.size)} bins")
+    print(f"{'P(1)':>6} {'filter':>26} {'file MB':>8} {'ratio':>7} {'write MB/s':>11} {'read MB/s':>10}")
+    for r in filters(args.size, [0.001, 0.05]):
+        print(f"{r['level']:6.3f} {r['filter']:>26} {r['file_mb']:8.2f} {r['ratio']:6.1f}× {r['write_mb_s']:11.0f} "
+              f"{r['read_mb_s']:10.0f}")
+    print("(MB/s of uncompressed packed bits per CPU second)")
+    print(f"\nWarm-up of a fresh process (import + first chunk, numba cache): {warm_up_seconds():.2f} s wall")
     size = 256
     durations = [0.05, 0.2] if args.quick else [0.1, 0.4]
     print(f"\nStreaming simulate_spad → HDF5, {size}x{size}, mean P(1) = 0.05, durations {durations} s")

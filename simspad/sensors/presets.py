@@ -70,8 +70,12 @@ class FrameParams(_PixelArea):
     """Microlensed: the effective area loss is folded into ``qe``."""
     qe: float = 0.65
     """Quantum efficiency η, spectrally weighted (≈ 0.65–0.70 at 525 nm)."""
-    gain_dn_per_e: float = 0.39
-    """System gain K (DN per electron): 12-bit range over the ≈ 10.5 ke⁻ full well."""
+    gain_dn_per_e: float = 0.38
+    """System gain K (DN per electron). The report's measured quantity is the saturation capacity (full well,
+    10.5 ke⁻); K is chosen so that the 12-bit range above the black level covers it:
+    K ≤ (4095 − 40 DN)/10 500 e⁻ = 0.386. 0.38 puts the full well at 4030 DN, 65 DN (≈ 60 σ of read noise)
+    below the ADC clip, so saturation in the output is the full well, as in the camera (0.39 clipped in the ADC
+    at 10 397 e⁻ and hid it)."""
     read_noise_e: float = 2.8
     full_well_e: float = 10500.0
     bit_depth: int = 12

@@ -14,12 +14,12 @@ T = 10e-3
 
 
 def test_frame_camera_hand_value():
-    # Blackfly S: pitch 3.45 µm, qe 0.65, read 2.8 e⁻, dark 3 e⁻/s, K 0.39 DN/e⁻
+    # Blackfly S: pitch 3.45 µm, qe 0.65, read 2.8 e⁻, dark 3 e⁻/s, K 0.38 DN/e⁻
     mu = 0.65 * PHI * 3.45e-6 ** 2 * T  # 77.366 e⁻
-    var = mu + 2.8 ** 2 + 3.0 * T + 1 / (12 * 0.39 ** 2)
+    var = mu + 2.8 ** 2 + 3.0 * T + 1 / (12 * 0.38 ** 2)
     assert mu == pytest.approx(77.366, abs=1e-3)
     assert snr.snr_frame_db(PHI, exposure_s=T) == pytest.approx(10 * math.log10(mu ** 2 / var), abs=1e-9)
-    assert snr.snr_frame_db(PHI, exposure_s=T) == pytest.approx(18.4366, abs=1e-3)
+    assert snr.snr_frame_db(PHI, exposure_s=T) == pytest.approx(18.4355, abs=1e-3)
     assert snr.snr_frame_db(1e18, exposure_s=T) == -np.inf  # 77 ke⁻ > 10.5 ke⁻ full well
 
 

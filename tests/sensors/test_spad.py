@@ -321,3 +321,48 @@ def test_ml_estimator_recovers_flux_within_predicted_std(x):
     assert abs(z.mean()) < 4.5 / math.sqrt(N) + 0.05  # + O(1/√n) bias of the ML estimator
     assert abs(z.var() - 1) < 4.5 * math.sqrt(2 / N) + 0.05
     assert np.all(np.abs(est / flux - 1) < 6 * sd)
+
+
+def test_recording_holds_the_chunker_bins_when_chunks_do_not_align(tmp_path, monkeypatch):
+    """Streamed chunks (1572 bins here) that are not a multiple of the HDF5 chunk (1048 bins) are stored intact.
+
+    The appender keeps the rows short of a whole HDF5 chunk as a view until the next append; reusing the chunk
+    buffer used to overwrite them with the next chunk's bins.
+    """
+    from simspad.sensors.spad import simulator
+
+    monkeypatch.setattr(simulator, "CHUNK_BYTES", 3 << 19)
+    h, w = 125, 64
+    m, rows = simulator.chunk_bins(h, w), simulator.h5_chunk_bins(h, w)
+    assert m % rows != 0
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    n = 2 * m + 300
+    duration = (n - 1) * BIN_S + p.gate_s
+    tl = _flat_timeline(flux_scale(1.0, 10.0), t_end=duration, shape=(h, w))
+    with RecordingWriter(tmp_path / "r.h5", {"width": w, "height": h, "duration_s": duration, "lux": 10.0}) as wr:
+        attrs = simulate_spad(wr, tl, 0.0, duration, p, np.random.default_rng(4))
+    assert attrs["n_bins"] == n
+    rng = np.random.default_rng(4)
+    chunker = SpadChunker(tl, 0.0, n, p, dcr_map((h, w), p, rng), rng)
+    expected = np.concatenate([chunker.chunk(k0, min(m, n - k0)) for k0 in range(0, n, m)])
+    with open_recording(tmp_path / "r.h5") as rec:
+        stored = rec.spad._dataset("bits")[()]
+    assert expected.any() and np.array_equal(stored, expected)
+
+
+def test_sparse_sampler_pixels_of_one_byte_keep_their_own_rates():
+    """Sparse bytes draw candidates at the byte's largest rate and thin them per pixel: within every byte the
+    columns' Λ span 0.0005–0.07 (all below the sparse threshold), yet each pixel's count follows its own
+    Binomial (χ²); giving every pixel its byte's mean probability is rejected by the same bound."""
+    h, w, n = 32, 64, 20_000
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    q = p.detection_area_m2
+    lam = np.geomspace(5e-4, 0.07, 8)[np.arange(w) % 8]
+    flux = np.broadcast_to(lam / (q * BIN_S), (h, w)).astype(np.float32)
+    tl = Timeline.from_arrays([0.0, 1.0], np.stack([flux, flux]))
+    counts = _counts(SpadChunker(tl, 0.0, n, p, np.zeros((h, w), np.float32), np.random.default_rng(9)), n, w)
+    expected = np.broadcast_to(-np.expm1(-q * BIN_S * flux.astype(np.float64)), (h, w))
+    stat, dof, bound = _chi2_ok(counts, expected, n)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    byte_mean = np.repeat(expected.reshape(h, w // 8, 8).mean(axis=2), 8, axis=1)
+    assert _chi2_ok(counts, byte_mean, n)[0] > 3 * bound

@@ -3,13 +3,15 @@
 Efficiency
 ----------
 Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
-are simulated per output byte (8 pixels) by whichever sampler is cheaper (both are exact):
+are simulated per output byte (8 pixels) by whichever of two exact samplers is cheaper for the byte's largest
+probability bound p_max (the flux is piecewise linear, so its bounds sit on keyframes):
 
-- *sparse* (byte's largest probability bound below :data:`SPARSE_MAX_PROBABILITY`): for each pixel, with
-  ``Λ_max`` the largest Λ over the chunk (the flux is piecewise linear, so its maximum sits on a keyframe),
-  draw geometric skips between candidate bins (``⌊E/Λ_max⌋`` with E exponential: one draw per candidate) and
-  keep a candidate with probability ``p_k/p_max`` (thinning, with a squeeze on the lower bound). Work is
-  proportional to detections, so dark scenes cost almost nothing;
+- *sparse* (p_max < :data:`SPARSE_MAX_PROBABILITY`): the byte's 8 pixels × m bins form one sequence of
+  candidate slots; geometric skips between candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one
+  exponential draw per candidate) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
+  and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
+  terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
+  among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel;
 - *dense*: bin by bin, one uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
   multiplication per bin inside a linear piece (Λ is affine in k there); the byte is assembled in a register.
 
@@ -30,7 +32,9 @@ import numpy as np
 
 from simspad.physics.rng import geometric, next_u64, uniform
 
-#: Per-pixel choice between the sparse (skip) and dense (uniform per bin) samplers: sparse below this p_max.
+#: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
+#: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
+#: benchmarks/bench_spad.py (a sparse detection costs ≈ 15× a dense bin; 0.02 and 0.05 were no faster).
 SPARSE_MAX_PROBABILITY = 0.08
 # The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
 _S32 = np.uint64(32)
@@ -150,20 +154,22 @@ def _lam(layout, k, y, x, q_gate, dark):
 # countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
 @numba.njit(cache=True)
 def spad_chunk(out, layout, response, seed):
-    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [m, H, ceil(W/8)].
+    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [H, m, ceil(W/8)] (row-major scratch).
 
     Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a gate that
     straddles a keyframe is a run of its own with A = B = its exact mean), so the images bound every gate mean
     of the call.
 
-    The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse pixels
-    one by one (geometric skips + thinning); dense bytes bin by bin, assembled in a register, with
-    z = exp(−Λ) advanced by one multiplication per bin inside a run.
+    The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
+    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, assembled in a register, with
+    z = exp(−Λ) advanced by one multiplication per bin inside a run). The random stream is consumed in that
+    order: sparse bytes in raster order, then dense blocks.
 
     Parameters
     ----------
-    out : ndarray [m, H, ceil(W/8)] uint8
-        Packed bits, OR-ed into.
+    out : ndarray [H, m, ceil(W/8)] uint8
+        Packed bits, OR-ed into; rows outermost so that a pixel's bins lie in one contiguous span (the samplers
+        run pixel by pixel through time; bin-major writes would touch a page per bin). The caller transposes.
     layout : ChunkLayout
     response : PixelResponse
     seed : int
@@ -180,7 +186,7 @@ def spad_chunk(out, layout, response, seed):
     gate_s = response.gate_s
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
-    m = out.shape[0]
+    m = out.shape[1]
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
     Wb = (W + 7) // 8
@@ -193,9 +199,10 @@ def spad_chunk(out, layout, response, seed):
         state, ct_left = geometric(state, log1m_ct)
     countdown = (ap_left, ct_left)
     pending = (np.empty((_EVENTS_CAPACITY, 3), np.int64), np.int64(0))
-    lam_dense = -math.log1p(-response.sparse_max_probability)
+    lam_dense = -math.log1p(-min(response.sparse_max_probability, 1.0 - 1e-12))
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
+    lo_bound = np.empty(8, np.float64)
     dense_y = np.empty(H * Wb, np.int64)
     dense_b = np.empty(H * Wb, np.int64)
     n_dense = 0
@@ -203,6 +210,9 @@ def spad_chunk(out, layout, response, seed):
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
+            for bit in range(8):
+                lam_hi[bit] = 0.0  # pixels past the right edge: never a detection
+                lam_lo[bit] = 0.0
             for bit in range(x_end):
                 x = 8 * xb + bit
                 hi = 0.0
@@ -220,33 +230,50 @@ def spad_chunk(out, layout, response, seed):
                 dense_b[n_dense] = xb
                 n_dense += 1
                 continue
-            for bit in range(x_end):
-                lam_max = lam_hi[bit]
-                if lam_max <= 0.0:
+            if hi_byte <= 0.0:
+                continue
+            # sparse: candidate slots over the byte's 8 pixels × m bins (s = 8·k + bit) at the byte's largest rate,
+            # or pixel by pixel (s = k) where one bright pixel (a hot one) would make the joint candidates dearer
+            sum_hi = 0.0
+            for bit in range(8):
+                lo = lam_lo[bit]
+                lo_bound[bit] = lo * (1.0 - 0.5 * lo)  # 1 − e^(−Λ) ≥ Λ − Λ²/2: a lower bound of every p_k
+                sum_hi += lam_hi[bit]
+            joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0  # expected draws: candidates + terminations
+            for g in range(1 if joint else x_end):
+                rate = hi_byte if joint else lam_hi[g]
+                if rate <= 0.0:
                     continue
-                x = 8 * xb + bit
-                dark = float(dcr[y, x]) * gate_s
-                varying = lam_lo[bit] < lam_max
-                p_max = -math.expm1(-lam_max) if varying else 1.0
-                p_min = -math.expm1(-lam_lo[bit]) if varying else 1.0
-                mask = np.uint8(1 << bit)
-                inv_lam = 1.0 / lam_max
-                k = np.int64(-1)
+                p_max = -math.expm1(-rate)
+                inv_lam = 1.0 / rate
+                n_slots = 8 * m if joint else m
+                s = np.int64(-1)
                 while True:
                     state, u = uniform(state)
                     skip = -math.log(1.0 - u) * inv_lam
-                    if skip >= m - 1 - k:
+                    if skip >= n_slots - 1 - s:
                         break
-                    k += 1 + np.int64(skip)
-                    if varying:  # thinning: keep with p_k / p_max (squeeze on the lower bound first)
-                        state, u = uniform(state)
-                        up = u * p_max
-                        if up >= p_min:
-                            lam = _lam(layout, k, y, x, q_gate, dark)
-                            if up >= -math.expm1(-lam):
-                                continue
-                    out[k, y, xb] |= mask
-                    state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape, response)
+                    s += 1 + np.int64(skip)
+                    k = s >> 3 if joint else s
+                    bit = s & 7 if joint else g
+                    # thinning: keep with p_k / p_max; p_k ≤ Λ_k ≤ lam_hi rejects most of a dim pixel's
+                    # candidates, the squeeze accepts most of the others without evaluating p_k
+                    state, u = uniform(state)
+                    up = u * p_max
+                    if up >= lam_hi[bit]:
+                        continue
+                    x = 8 * xb + bit
+                    if up >= lo_bound[bit]:
+                        lam = _lam(layout, k, y, x, q_gate, float(dcr[y, x]) * gate_s)
+                        if up >= -math.expm1(-lam):
+                            continue
+                    out[y, k, xb] |= np.uint8(1 << bit)
+                    ap_left, ct_left = countdown
+                    if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
+                        state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape,
+                                                                 response)
+                    else:
+                        countdown = (ap_left - 1, ct_left - 4)
     # blocks of dense bytes run through all bins while their state stays in L1 cache
     bin_run = layout.bin_run
     z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
@@ -279,7 +306,7 @@ def spad_chunk(out, layout, response, seed):
                     z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
                     # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
                     value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
-                out[k, dense_y[i], dense_b[i]] |= np.uint8(value)
+                out[dense_y[i], k, dense_b[i]] |= np.uint8(value)
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel

@@ -68,6 +68,7 @@ class SpadChunker:
                                       sparse_max_probability=SPARSE_MAX_PROBABILITY,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
+        self._rows = None
         self.n_detections_secondary = 0
 
     def chunk(self, k0: int, m: int, out: np.ndarray | None = None) -> np.ndarray:
@@ -75,14 +76,14 @@ class SpadChunker:
         H, W = self.tl.height, self.tl.width
         shape = (m, H, (W + 7) // 8)
         if out is None or out.shape != shape:
-            out = np.zeros(shape, np.uint8)
-        else:
-            out.fill(0)
+            out = np.empty(shape, np.uint8)  # every bin is overwritten by its sub-chunk's transpose
         found = []
         for j0, n in self._sub_chunks(k0, m):
             layout = self._layout(k0 + j0, n)
             seed = int(self.rng.integers(0, 2**63))
-            events = spad_chunk(out[j0 : j0 + n], layout, self.response, seed)
+            rows = self._scratch((H, n, shape[2]))
+            events = spad_chunk(rows, layout, self.response, seed)
+            out[j0 : j0 + n] = rows.transpose(1, 0, 2)
             events[:, 0] += j0
             found.append(events)
         events = np.concatenate(found)
@@ -94,6 +95,14 @@ class SpadChunker:
         # afterpulses of the very last bin fall outside the recording
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out
+
+    def _scratch(self, shape: tuple) -> np.ndarray:
+        """A zeroed row-major buffer [H, n, ceil(W/8)] for the kernel, reused between calls of the same shape."""
+        if self._rows is None or self._rows.shape != shape:
+            self._rows = np.zeros(shape, np.uint8)
+        else:
+            self._rows.fill(0)
+        return self._rows
 
     def _sub_chunks(self, k0: int, m: int):
         """Split bins so that no kernel call spans more than :data:`MAX_KEYFRAMES_PER_CALL` keyframes.
@@ -167,8 +176,7 @@ class SpadChunker:
         while j < m:
             i = idx[j]
             if not inside[j]:
-                t_k = starts[j]
-                y = self.tl.integrate(t_k, t_k + gate) / np.float32(gate)
+                y = _gate_mean(pieces, float(starts[j]), gate)
                 yield j, 1, y, y, 0.0, 0.0, False
                 j += 1
                 continue
@@ -181,6 +189,24 @@ class SpadChunker:
             dw = bin_s / span
             yield j, e - j, ya, yb, float(w0), float(dw), True
             j = e
+
+
+def _gate_mean(pieces, t: float, gate: float) -> np.ndarray:
+    """Exact mean over the gate ``[t, t + gate]`` of the piecewise-linear flux given by ``pieces``.
+
+    Each piece ``(a, b, ya, yb)`` it overlaps on ``[lo, hi]`` contributes ``(hi − lo)`` times its value at the
+    overlap's midpoint (exact for a linear function), as a weighted sum of the piece's end images: a few
+    multiply-adds per pixel, where a general ``Timeline.integrate`` interpolates and converts whole images.
+    """
+    total = None
+    for a, b, ya, yb in pieces:
+        lo, hi = max(t, a), min(t + gate, b)
+        if hi <= lo:
+            continue
+        w = (0.5 * (lo + hi) - a) / (b - a)
+        term = ya * np.float32((hi - lo) * (1.0 - w) / gate) + yb * np.float32((hi - lo) * w / gate)
+        total = term if total is None else total + term
+    return total
 
 
 def h5_chunk_bins(height: int, width: int) -> int:
@@ -238,11 +264,11 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)))
     chunker = SpadChunker(flux_tl, t0, n, resolved, dcr, rng)
     bar = tqdm(total=n, unit="bin", desc="spad", leave=False) if progress else None
-    buf = None
     for k0 in range(0, n, m):
         mm = min(m, n - k0)
-        buf = chunker.chunk(k0, mm, buf if buf is not None and buf.shape[0] == mm else None)
-        bits.append(buf)
+        # a fresh array per chunk: the appender may keep a view of the rows short of a whole HDF5 chunk until
+        # the next append, so a reused buffer would overwrite them (m need not be a multiple of its chunk rows)
+        bits.append(chunker.chunk(k0, mm))
         t_start.append(t0 + (k0 + np.arange(mm)) * params.bin_s)
         if bar is not None:
             bar.update(mm)
