@@ -52,14 +52,17 @@ def cli(debug: bool) -> None:
 @click.option("--min-rate", "min_rate_hz", type=float, default=defaults.MIN_KEYFRAME_RATE_HZ, show_default=True,
               help="Lowest keyframe rate (Hz), whatever the motion.")
 @click.option("--seed", type=int, default=defaults.SEED, show_default=True, help="Render seed (frozen Monte Carlo noise).")
+@click.option("--interpolation", type=click.Choice(["warp", "linear"]), default="warp", show_default=True,
+              help="warp: render sparse keyframes and synthesize the rest by reprojection; linear: render every one.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
-def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, out_dir):
+def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
+           out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own)."""
     from simspad.cli.render import describe_render, render_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
-                              out_dir=out_dir, progress=True)
+                              interpolation=interpolation, out_dir=out_dir, progress=True)
     click.echo(describe_render(summary))
 
 

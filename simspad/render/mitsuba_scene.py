@@ -201,6 +201,11 @@ class MitsubaScene:
                         np.float32(np.inf)).astype(np.float32)
 
 
+    @property
+    def moves_objects_without_ids(self) -> bool:
+        """Objects are animated but their pixels cannot be told apart (scalar variant): no reprojection."""
+        return bool(self.objects) and self._object_id_of_shape is None
+
     def render_depth_ids(self, seed: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Depth Z (m, as :meth:`render_depth`, same samples) and the per-pixel object id (float32; None when the
         scene has no animated object or the variant cannot name shapes), from one AOV pass."""

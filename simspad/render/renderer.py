@@ -39,6 +39,8 @@ from simspad.render.mitsuba_scene import (
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
+from simspad.render.warp_render import render_with_warps
+from simspad.render.warp_schedule import describe_disagreement
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["RenderSettings", "RenderSummary", "render_sequence", "select_variant"]
@@ -146,10 +148,21 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     names = frame_names(base_key, times)
 
     counter.take()  # kernels of loading and depth probes belong to no frame
-    done = _render_frames(ms, ts, [(t, cam_poses[i], out_dir / name) for i, (t, name) in enumerate(zip(times, names))],
-                          seed, counter, progress)
+    warp = settings.interpolation == "warp" and not ms.moves_objects_without_ids
+    if warp:  # render sparse keyframes, synthesize the rest (render/warp_render.py)
+        bar = _progress(len(times), progress)
+        try:
+            done = render_with_warps(ms, ts, times, cam_poses, base_key, out_dir, seed, counter, bar,
+                                     stride=settings.warp_stride, threshold=settings.warp_threshold)
+        finally:
+            bar.close()
+        names, sources = done.names, done.plan.sources
+    else:
+        done = _render_frames(ms, ts, [(t, cam_poses[i], out_dir / name)
+                                       for i, (t, name) in enumerate(zip(times, names))], seed, counter, progress)
+        sources = ["render"] * len(times)
 
-    keyframes = [{"t": float(t), "file": name, "camera_to_world": cam_poses[i].tolist()}
+    keyframes = [{"t": float(t), "file": name, "camera_to_world": cam_poses[i].tolist(), "source": sources[i]}
                  for i, (t, name) in enumerate(zip(times, names))]
     for kf in keyframes if ms.object_names else []:  # what reprojection needs to move animated objects
         kf["object_to_world"] = {k: m.tolist() for k, m in sorted(object_poses(ts, kf["t"]).items())}
@@ -158,6 +171,11 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     if n_spad_bins is not None:
         schedule["n_spad_bins"] = n_spad_bins
     schedule["max_predicted_flow_px"] = step_flow
+    schedule["interpolation"] = "warp" if warp else "linear"
+    schedule["n_rendered_keyframes"] = sources.count("render")
+    if warp:
+        schedule["warp"] = {"stride": done.stride, "threshold_x_noise": done.threshold, "render_noise": done.noise,
+                            **describe_disagreement(done.plan.disagreement)}
     write_timeline_json(
         out_dir, width=width, height=height, keyframes=keyframes,
         scene=info.name, scene_hash=base_key["scene"], trajectory=traj_source, trajectory_hash=traj_hash,
@@ -178,7 +196,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                          render_s=done.render_s, variant=variant,
                          compiled_first_frame=done.compiled[0] if done.compiled else -1,
                          compiled_after_first=sum(done.compiled[1:]) if counter.enabled else -1,
-                         max_predicted_flow_px=step_flow, spad_bin_s=spad_bin_s, frame_times_s=done.frame_times_s)
+                         max_predicted_flow_px=step_flow, spad_bin_s=spad_bin_s, frame_times_s=done.frame_times_s,
+                         n_warped=sources.count("warp"))
 
 
 class _RenderedFrames(NamedTuple):

@@ -12,6 +12,11 @@ from dataclasses import dataclass
 
 from simspad import defaults
 from simspad.errors import SimSpadError
+from simspad.render.warp_schedule import WARP_STRIDE, WARP_THRESHOLD
+
+
+#: Keyframe interpolation modes: synthesize between sparse renders by reprojection, or render every keyframe.
+INTERPOLATIONS = ("warp", "linear")
 
 
 @dataclass(frozen=True)
@@ -32,6 +37,16 @@ class RenderSettings:
         Keyframes are at most ``1 / min_rate_hz`` apart.
     seed : int
         Render seed, the same for every frame (noise frozen in screen space).
+    interpolation : str
+        ``"warp"``: render sparse keyframes and synthesize those between by reprojection, rendering for real
+        where the warps disagree (:mod:`simspad.render.warp_schedule`); ``"linear"``: render every keyframe.
+        Both give the same keyframe instants; the timeline is linear in time between keyframes either way.
+    warp_stride : int
+        With ``"warp"``: rendered keyframes are at most this many keyframes apart.
+    warp_threshold : float
+        With ``"warp"``: a synthesized keyframe whose two warps disagree by more than this many times a render's
+        Monte Carlo noise (relative RMS of their luminance + hole fraction) makes the renderer render the
+        keyframes between for real.
     """
 
     duration_s: float
@@ -41,6 +56,9 @@ class RenderSettings:
     max_flow_px: float = defaults.MAX_FLOW_PX
     min_rate_hz: float = defaults.MIN_KEYFRAME_RATE_HZ
     seed: int = defaults.SEED
+    interpolation: str = "warp"
+    warp_stride: int = WARP_STRIDE
+    warp_threshold: float = WARP_THRESHOLD
 
     def checked_size(self) -> tuple[int, int]:
         """Check every field; return (width, height) in pixels.
@@ -74,4 +92,10 @@ class RenderSettings:
             bad("min_rate_hz", f"must be > 0 Hz, got {min_rate_hz!r}")
         if not isinstance(seed, numbers.Integral) or seed < 0:
             bad("seed", f"must be an integer >= 0, got {seed!r}")
+        if self.interpolation not in INTERPOLATIONS:
+            bad("interpolation", f"must be one of {', '.join(INTERPOLATIONS)}, got {self.interpolation!r}")
+        if not (isinstance(self.warp_stride, numbers.Integral) and self.warp_stride >= 1):
+            bad("warp_stride", f"must be an integer >= 1, got {self.warp_stride!r}")
+        if not (isinstance(self.warp_threshold, numbers.Real) and self.warp_threshold >= 0):
+            bad("warp_threshold", f"must be a number >= 0, got {self.warp_threshold!r}")
         return width, height
