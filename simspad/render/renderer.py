@@ -8,6 +8,10 @@ screen space: radiance (the scene's integrator, ``spp`` samples) and depth (an `
 (:mod:`simspad.render.mitsuba_scene`). Each keyframe is one EXR (R, G, B, Z) written atomically, named by a hash
 of everything that determines its pixels, so re-runs re-use frames and an interrupted render resumes
 (:mod:`simspad.render.keyframe_files`); ``timeline.json`` is written last.
+
+With ``interpolation = "warp"`` (the default) only sparse keyframes are rendered; those between are synthesized
+by reprojection and rendered for real only where the warps disagree (:mod:`simspad.render.warp_render`);
+``timeline.json`` marks each keyframe's ``source``.
 """
 
 from __future__ import annotations
@@ -174,7 +178,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     schedule["interpolation"] = "warp" if warp else "linear"
     schedule["n_rendered_keyframes"] = sources.count("render")
     if warp:
-        schedule["warp"] = {"stride": done.stride, "threshold_x_noise": done.threshold, "render_noise": done.noise,
+        schedule["warp"] = {"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
                             **describe_disagreement(done.plan.disagreement)}
     write_timeline_json(
         out_dir, width=width, height=height, keyframes=keyframes,

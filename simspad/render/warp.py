@@ -41,6 +41,13 @@ FAR_DEPTH_M = 1e7
 DEPTH_TOLERANCE = 0.02
 #: Rounds of hole filling (each closes holes one pixel wide) after the forward splat.
 HOLE_FILL_ROUNDS = 3
+#: Side of the square tiles over which the two warps' difference is compared with the render noise, pixels.
+TILE_PX = 8
+#: A tile's noise is floored at this fraction of the frame's RMS noise (tiles a render gets noiseless, e.g. flat
+#: light, must not turn any resampling round-off into a failure).
+TILE_NOISE_FLOOR = 0.5
+#: Fraction of hole pixels that counts as one noise unit of disagreement.
+HOLE_TOLERANCE = 0.01
 #: Cubic B-spline resampling of radiance: interpolating, so an unmoved pixel keeps its value exactly.
 SPLINE_ORDER = 3
 
@@ -81,15 +88,23 @@ class Disagreement:
         Fraction of pixels neither source sees consistently.
     single_fraction : float
         Fraction of pixels only one source sees (disocclusions; taken from that source alone).
+    noise_ratio : float
+        With a noise map: the largest, over :data:`TILE_PX`-pixel tiles, of the RMS difference of the two warps
+        ÷ the RMS difference two renders' Monte Carlo noise alone would give there (√2 × the tile's noise);
+        about 1 where the warps agree up to noise, whatever part of the frame goes wrong. NaN without one.
     """
 
     rel_rms: float
     hole_fraction: float
     single_fraction: float
+    noise_ratio: float = float("nan")
 
     def score(self) -> float:
-        """One number to threshold: ``rel_rms + hole_fraction`` (a hole counts as a 100 % mismatch of its pixel)."""
-        return float(self.rel_rms + self.hole_fraction)
+        """One number to threshold. With a noise map: ``noise_ratio + hole_fraction / HOLE_TOLERANCE`` (in
+        units of the render noise); without: ``rel_rms + hole_fraction`` (a hole counts as a 100 % mismatch)."""
+        if np.isnan(self.noise_ratio):
+            return float(self.rel_rms + self.hole_fraction)
+        return float(self.noise_ratio + self.hole_fraction / HOLE_TOLERANCE)
 
 
 class _Prepared:
@@ -199,8 +214,29 @@ def _same_pose(src: WarpSource, to_camera, to_objects) -> bool:
             and all(np.array_equal(m, n) for m, n in zip(src.object_poses, to_objects)))
 
 
+def _tile_noise_ratio(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -> float:
+    """Largest tile RMS of ``diff`` (where ``both``) over √2 × the tile RMS of ``noise_y`` (floored)."""
+    h, w = diff.shape
+    th, tw = -(-h // TILE_PX), -(-w // TILE_PX)
+    pad = ((0, th * TILE_PX - h), (0, tw * TILE_PX - w))
+
+    def tiles(a):
+        return np.pad(a, pad).reshape(th, TILE_PX, tw, TILE_PX).sum(axis=(1, 3))
+
+    n = tiles(both.astype(np.float64))
+    sq = tiles(np.where(both, diff.astype(np.float64) ** 2, 0.0))
+    noise2 = tiles(np.asarray(noise_y, dtype=np.float64) ** 2) / tiles(np.ones((h, w)))
+    floor2 = (TILE_NOISE_FLOOR ** 2) * float(np.mean(np.asarray(noise_y, dtype=np.float64) ** 2))
+    enough = n >= TILE_PX * TILE_PX / 4
+    if not enough.any() or floor2 <= 0:
+        return 0.0
+    ratio = np.sqrt(sq[enough] / n[enough] / (2.0 * np.maximum(noise2[enough], floor2)))
+    return float(ratio.max())
+
+
 def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: float, to_camera: np.ndarray,
-               to_objects=()) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, Disagreement]:
+               to_objects=(), noise_y: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, Disagreement]:
     """The keyframe at pose ``to_camera`` between rendered keyframes ``a`` and ``b``.
 
     Parameters
@@ -214,6 +250,9 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
         Camera-to-world at the target instant.
     to_objects : sequence of ndarray (4, 4)
         ``object_to_world`` of each animated object at the target instant (as in :class:`WarpSource`).
+    noise_y : ndarray [H, W], optional
+        Monte Carlo noise (σ of luminance, absolute) of one render, per pixel: scales the disagreement
+        (:attr:`Disagreement.noise_ratio`).
 
     Returns
     -------
@@ -226,7 +265,7 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
         if at and _same_pose(p.src, to_camera, to_objects):  # the target is that rendered keyframe
             ids = None if p.src.object_id is None else np.asarray(p.src.object_id, dtype=np.float32).copy()
             return (np.asarray(p.src.rgb, dtype=np.float32).copy(), np.asarray(p.src.depth_z, np.float32).copy(),
-                    ids, Disagreement(0.0, 0.0, 0.0))
+                    ids, Disagreement(0.0, 0.0, 0.0, float("nan") if noise_y is None else 0.0))
     z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
     finite = np.isfinite(z)
     z_far = np.where(finite, z, FAR_DEPTH_M)
@@ -248,8 +287,9 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
     rel_rms = (float(np.sqrt(np.mean((ya[both] - yb[both]) ** 2, dtype=np.float64))) / mean_y
                if both.any() and mean_y > 0 else 0.0)
     n = float(z.size)
+    ratio = float("nan") if noise_y is None else _tile_noise_ratio(ya - yb, both, noise_y)
     dis = Disagreement(rel_rms=rel_rms, hole_fraction=float(hole.sum()) / n,
-                       single_fraction=float((va ^ vb).sum()) / n)
+                       single_fraction=float((va ^ vb).sum()) / n, noise_ratio=ratio)
     depth = np.where(z_far >= 0.5 * FAR_DEPTH_M, np.inf, z_far).astype(np.float32)
     has_ids = a.ids is not None or b.ids is not None
     return (rgb.astype(np.float32), depth, ids.astype(np.float32) if has_ids else None, dis)

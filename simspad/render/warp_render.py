@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from simspad.io.exr import read_exr
 from simspad.motion.trajectory import TrajectorySet
@@ -33,9 +34,11 @@ from simspad.render.warp_schedule import (
 
 #: Bumped when synthesized pixels from the same anchors would change: part of their cache key.
 WARP_VERSION = 1
-#: Floor of the measured render noise (relative RMS) that scales the disagreement threshold: a noiseless render
-#: (a flat scene) must not make every synthesized keyframe fail on round-off.
-MIN_NOISE = 2e-3
+#: Floor of the per-pixel render noise, as a fraction of its mean: a noiseless render (a flat scene) must not make
+#: every synthesized keyframe fail on round-off.
+MIN_NOISE = 0.05
+#: Gaussian σ (pixels) that turns the squared difference of the two noise-probe renders into a noise level.
+NOISE_SMOOTHING_PX = 2.0
 
 
 class WarpedFrames(NamedTuple):
@@ -47,7 +50,7 @@ class WarpedFrames(NamedTuple):
     render_s: float  # wall time of the whole loop (renders and synthesis), s
     stride: int  # anchor spacing used, keyframes
     threshold: float  # disagreement threshold used, in units of the render noise
-    noise: float  # Monte Carlo noise of one render (relative RMS), measured at the first keyframe
+    noise: float  # Monte Carlo noise of one render (RMS ÷ mean luminance), measured at the first keyframe
 
 
 def warp_key(base_key: dict, stride: int, threshold: float) -> dict:
@@ -92,19 +95,24 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
             write_frame(path, rgb, depth, object_id)
 
     tic = time.perf_counter()
-    noise = render_noise(ms, ts, float(times[0]), cam_poses[0], seed) if len(times) > 2 else 0.0
+    noise_y, noise = None, 0.0
+    if len(times) > 2:
+        noise_y, mean_y = render_noise(ms, ts, float(times[0]), cam_poses[0], seed)
+        noise = float(np.sqrt(np.mean(noise_y ** 2)) / mean_y) if mean_y > 0 else 0.0
+        noise_y = np.maximum(noise_y, MIN_NOISE * noise_y.mean())  # a noiseless render: round-off is no failure
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
-                                stride=stride, threshold=threshold * max(noise, MIN_NOISE),
+                                stride=stride, threshold=threshold, noise_y=noise_y,
                                 on_keyframe=lambda i: bar.update(1))
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
                         noise)
 
 
-def render_noise(ms: MitsubaScene, ts: TrajectorySet, t: float, camera_to_world: np.ndarray, seed: int) -> float:
-    """Monte Carlo noise of one render (relative RMS of luminance): two renders of the same pose with seeds
-    ``seed`` and ``seed + 1`` differ by √2 times it. Two more renders per sequence; they are not keyframes."""
+def render_noise(ms: MitsubaScene, ts: TrajectorySet, t: float, camera_to_world: np.ndarray, seed: int
+                 ) -> tuple[np.ndarray, float]:
+    """Monte Carlo noise of one render per pixel (σ of luminance, absolute), from two renders of the same pose
+    with seeds ``seed`` and ``seed + 1`` (they differ by √2 σ), smoothed over a few pixels so that it is a noise
+    *level* rather than one draw; and the mean luminance. Two more renders per sequence; they are not keyframes."""
     ms.set_pose(camera_to_world, object_poses(ts, t))
     y0 = luminance_from_rgb(ms.render_radiance(seed)).astype(np.float64)
     y1 = luminance_from_rgb(ms.render_radiance(seed + 1)).astype(np.float64)
-    mean = float(np.mean(y0))
-    return float(np.sqrt(np.mean((y1 - y0) ** 2) / 2) / mean) if mean > 0 else 0.0
+    return np.sqrt(gaussian_filter((y1 - y0) ** 2 / 2, NOISE_SMOOTHING_PX, mode="nearest")), float(np.mean(y0))

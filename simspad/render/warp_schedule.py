@@ -22,9 +22,10 @@ from simspad.render.warp import Disagreement, WarpSource, prepare, synthesize
 
 #: Rendered keyframes are at most this many keyframes of the linear schedule apart.
 WARP_STRIDE = 16
-#: Largest disagreement score of a synthesized keyframe (relative RMS of the two warps + hole fraction), in units
-#: of the relative Monte Carlo noise σ of one render. Two warps with independent errors s each differ by √2·s and
-#: their mid-way blend errs by s/√2, so a disagreement ≤ 2σ keeps the blend's error at or below a render's σ.
+#: Largest disagreement score of a synthesized keyframe (:meth:`simspad.render.warp.Disagreement.score`): the worst
+#: tile's RMS difference of the two warps in units of what two renders' Monte Carlo noise alone would give (≈ 1
+#: where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
+#: mid-way blend errs by s/√2: a ratio ≤ 2 keeps the blend's error within about √2 × a render's own noise.
 WARP_THRESHOLD = 2.0
 #: ``source`` of a keyframe in ``timeline.json``.
 SOURCE_RENDER, SOURCE_WARP = "render", "warp"
@@ -64,6 +65,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                          target: Callable[[int], tuple[np.ndarray, tuple]],
                          write: Callable[[int, np.ndarray, np.ndarray, np.ndarray | None], None], *,
                          stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
+                         noise_y: np.ndarray | None = None,
                          on_keyframe: Callable[[int], None] | None = None) -> WarpPlanResult:
     """Render the anchors, synthesize the rest, render where the warps disagree.
 
@@ -81,8 +83,10 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     stride : int
         Rendered keyframes up front are this many keyframes apart (:data:`WARP_STRIDE`).
     threshold : float
-        Largest :meth:`Disagreement.score` accepted (absolute: the caller scales :data:`WARP_THRESHOLD` by the
-        render noise).
+        Largest :meth:`Disagreement.score` accepted (:data:`WARP_THRESHOLD`: in units of the render noise when
+        ``noise_y`` is given).
+    noise_y : ndarray [H, W], optional
+        Monte Carlo noise of one render per pixel (absolute σ of luminance), see :func:`simspad.render.warp.synthesize`.
     on_keyframe : callable, optional
         Called with each keyframe index once it is final (progress).
 
@@ -109,7 +113,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         for i in range(i0 + 1, i1):
             pose, objects = target(i)
             w = float((times[i] - times[i0]) / (times[i1] - times[i0]))
-            frames[i] = synthesize(camera, p0, p1, w, pose, objects)
+            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y)
         worst = max(f[3].score() for f in frames.values())
         if worst <= threshold:
             for i, (rgb, depth, ids, dis) in frames.items():

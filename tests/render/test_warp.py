@@ -231,3 +231,19 @@ def test_cli_interpolation_flag(tmp_path, _variant):
     assert meta["schedule"]["interpolation"] == "linear"
     assert main(["render", str(folder), "--duration", "0.002", "--resolution", "32x24",
                  "--interpolation", "cubic", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_disagreement_is_measured_in_noise_units_per_tile():
+    # Two warps differing by two renders' noise alone score about 1; a wrong patch of one tile stands out
+    # although it barely moves the frame's RMS.
+    from simspad.render.warp import _tile_noise_ratio
+
+    rng = np.random.default_rng(4)
+    sigma = np.full((H, W), 0.05)
+    diff = rng.normal(0.0, np.sqrt(2) * 0.05, (H, W))
+    both = np.ones((H, W), dtype=bool)
+    assert 0.9 < _tile_noise_ratio(diff, both, sigma) < 1.5
+    bad = diff.copy()
+    bad[8:16, 16:24] += 0.5  # one 8x8 tile off by 10 sigma
+    assert _tile_noise_ratio(bad, both, sigma) > 5
+    assert np.sqrt(np.mean(bad ** 2)) < 2 * np.sqrt(np.mean(diff ** 2))
