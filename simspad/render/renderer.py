@@ -152,7 +152,10 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     names = frame_names(base_key, times)
 
     counter.take()  # kernels of loading and depth probes belong to no frame
-    warp = settings.interpolation == "warp" and not ms.moves_objects_without_ids
+    # Warp needs object ids to move animated objects, and pays two noise-probe renders: below two strides of
+    # keyframes it saves nothing, so such short sequences render every keyframe.
+    warp = (settings.interpolation == "warp" and not ms.moves_objects_without_ids
+            and len(times) >= 2 * settings.warp_stride)
     if warp:  # render sparse keyframes, synthesize the rest (render/warp_render.py)
         bar = _progress(len(times), progress)
         try:
