@@ -24,7 +24,8 @@ def describe_render(summary: RenderSummary) -> str:
     lines = [
         f"render dir: {summary.out_dir}",
         f"keyframes: {summary.n_keyframes} over {summary.duration_s:g} s from t = {summary.start_s:g} s "
-        f"({summary.n_rendered} rendered, {summary.n_reused} re-used from the cache)",
+        f"({summary.n_rendered} rendered, {summary.n_reused} re-used from the cache, "
+        f"{summary.n_warped} synthesized by reprojection)",
         f"{comparison}largest predicted motion between keyframes {summary.max_predicted_flow_px:.3f} px",
         f"variant: {summary.variant}; {per_frame}; total {summary.render_s:.2f} s",
     ]

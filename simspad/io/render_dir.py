@@ -2,9 +2,11 @@
 
 ``timeline.json`` holds ``format`` (:data:`TIMELINE_FORMAT`), ``version`` (:data:`TIMELINE_VERSION`), ``width``
 and ``height`` in pixels, and ``keyframes = [{t (s), file (relative path), camera_to_world (4x4, optional)}]``
-with strictly increasing ``t``, plus whatever a renderer records (``scene``, ``trajectory``, ``renderer``, ...).
+with strictly increasing ``t``, plus whatever a renderer records (``scene``, ``trajectory``, ``renderer``, ...;
+SimSPAD's renderer adds ``source``: ``"render"`` or ``"warp"`` (synthesized by reprojection) per keyframe, and
+``object_to_world`` per keyframe when the scene animates objects).
 It is written last, so its presence marks a complete directory. Each keyframe EXR carries ``R,G,B`` (or ``Y``)
-radiance and optionally depth ``Z`` in metres (:mod:`simspad.io.exr`).
+radiance and optionally depth ``Z`` in metres and a per-pixel ``object_id`` (:mod:`simspad.io.exr`).
 
 :func:`read_render_dir` validates the index and every frame header; :func:`read_keyframe` reads one frame's
 pixels and checks them (finite, non-negative). The interpolation in time is

@@ -8,6 +8,10 @@ screen space: radiance (the scene's integrator, ``spp`` samples) and depth (an `
 (:mod:`simspad.render.mitsuba_scene`). Each keyframe is one EXR (R, G, B, Z) written atomically, named by a hash
 of everything that determines its pixels, so re-runs re-use frames and an interrupted render resumes
 (:mod:`simspad.render.keyframe_files`); ``timeline.json`` is written last.
+
+With ``interpolation = "warp"`` (the default) only sparse keyframes are rendered; those between are synthesized
+by reprojection and rendered for real only where the warps disagree (:mod:`simspad.render.warp_render`);
+``timeline.json`` marks each keyframe's ``source``.
 """
 
 from __future__ import annotations
@@ -40,12 +44,14 @@ from simspad.render.mitsuba_scene import (
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
+from simspad.render.warp_render import render_with_warps
+from simspad.render.warp_schedule import describe_disagreement
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["RenderSettings", "RenderSummary", "render_sequence", "select_variant"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
-RENDERER_VERSION = 5
+RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
 #: Slack (s) allowed between the requested span and the trajectory's span.
 SPAN_TOLERANCE_S = 1e-9
 
@@ -147,16 +153,37 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     names = frame_names(base_key, times)
 
     counter.take()  # kernels of loading and depth probes belong to no frame
-    done = _render_frames(ms, ts, [(t, cam_poses[i], out_dir / name) for i, (t, name) in enumerate(zip(times, names))],
-                          seed, counter, progress)
+    # Warp needs object ids to move animated objects, and pays two noise-probe renders: below two strides of
+    # keyframes it saves nothing, so such short sequences render every keyframe.
+    warp = (settings.interpolation == "warp" and not ms.moves_objects_without_ids
+            and len(times) >= 2 * settings.warp_stride)
+    if warp:  # render sparse keyframes, synthesize the rest (render/warp_render.py)
+        bar = _progress(len(times), progress)
+        try:
+            done = render_with_warps(ms, ts, times, cam_poses, base_key, out_dir, seed, counter, bar,
+                                     stride=settings.warp_stride, threshold=settings.warp_threshold)
+        finally:
+            bar.close()
+        names, sources = done.names, done.plan.sources
+    else:
+        done = _render_frames(ms, ts, [(t, cam_poses[i], out_dir / name)
+                                       for i, (t, name) in enumerate(zip(times, names))], seed, counter, progress)
+        sources = ["render"] * len(times)
 
-    keyframes = [{"t": float(t), "file": name, "camera_to_world": cam_poses[i].tolist()}
+    keyframes = [{"t": float(t), "file": name, "camera_to_world": cam_poses[i].tolist(), "source": sources[i]}
                  for i, (t, name) in enumerate(zip(times, names))]
+    for kf in keyframes if ms.object_names else []:  # what reprojection needs to move animated objects
+        kf["object_to_world"] = {k: m.tolist() for k, m in sorted(object_poses(ts, kf["t"]).items())}
     n_spad_bins = None if spad_bin_s is None else brute_force_keyframes(duration_s, spad_bin_s)
     schedule = {"n_keyframes": len(times)}
     if n_spad_bins is not None:
         schedule["n_spad_bins"] = n_spad_bins
     schedule["max_predicted_flow_px"] = step_flow
+    schedule["interpolation"] = "warp" if warp else "linear"
+    schedule["n_rendered_keyframes"] = sources.count("render")
+    if warp:
+        schedule["warp"] = {"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
+                            **describe_disagreement(done.plan.disagreement)}
     write_timeline_json(
         out_dir, width=width, height=height, keyframes=keyframes,
         scene=info.name, scene_hash=base_key["scene"], trajectory=traj_source, trajectory_hash=traj_hash,
@@ -167,6 +194,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                   "depth": "Z: distance along the optical axis, m (inf: no hit)",
                   "max_flow_px": max_flow_px, "min_rate_hz": min_rate_hz, "near_depth_m": near_depth_m,
                   "focal_px": ms.focal_px, "x_fov_deg": ms.x_fov_deg, "camera_id": info.camera_id,
+                  "animated_objects": ms.object_names,
                   "simspad_renderer_version": RENDERER_VERSION},
         schedule=schedule,
     )
@@ -176,7 +204,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                          render_s=done.render_s, variant=variant,
                          compiled_first_frame=done.compiled[0] if done.compiled else -1,
                          compiled_after_first=sum(done.compiled[1:]) if counter.enabled else -1,
-                         max_predicted_flow_px=step_flow, spad_bin_s=spad_bin_s, frame_times_s=done.frame_times_s)
+                         max_predicted_flow_px=step_flow, spad_bin_s=spad_bin_s, frame_times_s=done.frame_times_s,
+                         n_warped=sources.count("warp"))
 
 
 class _RenderedFrames(NamedTuple):
@@ -201,8 +230,8 @@ def _render_frames(ms: MitsubaScene, ts: TrajectorySet, frames: list, seed: int,
             tic = time.perf_counter()
             ms.set_pose(camera_to_world, object_poses(ts, t))
             rgb = ms.render_radiance(seed)
-            depth = ms.render_depth(seed)
-            write_frame(path, rgb, depth)
+            depth, object_id = ms.render_depth_ids(seed)
+            write_frame(path, rgb, depth, object_id)
             frame_times.append(time.perf_counter() - tic)
             compiled.append(counter.take())
             bar.update(1)

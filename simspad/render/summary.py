@@ -35,6 +35,8 @@ class RenderSummary:
         The SPAD bin the keyframe count is compared with, seconds.
     frame_times_s : list of float
         Wall time of each rendered keyframe (radiance + depth), seconds.
+    n_warped : int
+        Keyframes synthesized by reprojection (``interpolation = "warp"``) rather than rendered.
     """
 
     out_dir: Path
@@ -51,6 +53,7 @@ class RenderSummary:
     max_predicted_flow_px: float = 0.0
     spad_bin_s: float | None = None
     frame_times_s: list = field(default_factory=list, repr=False)
+    n_warped: int = 0
 
     @property
     def time_per_frame_s(self) -> float:

@@ -110,7 +110,8 @@ def test_no_kernel_recompilation_while_only_poses_change(tmp_path, _variant):
     if not _variant.startswith("llvm"):
         pytest.skip("kernel compilation is counted on the LLVM variant only")
     folder = _textured_folder(tmp_path / "tex")
-    s = render_sequence(folder, _pan(), RenderSettings(duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=200.0),
+    s = render_sequence(folder, _pan(), RenderSettings(duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=200.0,
+                                                                   interpolation="linear"),
                         out_dir=tmp_path / "r", progress=False)
     assert s.n_rendered >= 6
     assert s.compiled_after_first == 0, s
@@ -135,14 +136,14 @@ def test_simspad_render_compares_with_the_spad_preset_bin(tmp_path, capsys):
     n_bins = sch.brute_force_keyframes(0.002, SpadParams().bin_s)
     assert f"versus one per 10.24 µs SPAD bin: {n_bins} renders" in capsys.readouterr().out
     schedule = json.loads((out / "timeline.json").read_text())["schedule"]
-    assert list(schedule) == ["n_keyframes", "n_spad_bins", "max_predicted_flow_px"]
+    assert list(schedule)[:3] == ["n_keyframes", "n_spad_bins", "max_predicted_flow_px"]
     assert schedule["n_spad_bins"] == n_bins
 
 
 # ------------------------------------------------------------------------------------------ cache, resume
 def test_cache_reuse_resume_and_invalidation(tmp_path):
     folder = _textured_folder(tmp_path / "tex")
-    settings = RenderSettings(duration_s=0.05, resolution=(W, H), spp=2, min_rate_hz=100.0)
+    settings = RenderSettings(duration_s=0.05, resolution=(W, H), spp=2, min_rate_hz=100.0, interpolation="linear")
     kwargs = dict(out_dir=tmp_path / "r", progress=False)
     first = render_sequence(folder, _pan(), settings, **kwargs)
     doc = (tmp_path / "r" / "timeline.json").read_text()

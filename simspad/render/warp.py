@@ -1,0 +1,295 @@
+"""Motion-compensated keyframe synthesis: an in-between keyframe from the two rendered keyframes around it.
+
+A rendered keyframe (:class:`WarpSource`: linear RGB, depth Z, optional object ids, camera and object poses)
+is carried to the target pose by reprojection (:mod:`simspad.render.reprojection`):
+
+1. **Forward splat of geometry.** Every pixel of both sources is reprojected to the target and splatted to its
+   nearest target pixel through a z-buffer (nearest surface wins), giving the target's depth and object ids.
+   Holes left by magnification or disocclusion take the *farthest* depth around them (what a disocclusion
+   reveals is background).
+2. **Backward warp of radiance.** Each target pixel's surface point is moved back to each source's instant (with
+   its object's transform) and projected into the source, whose radiance is sampled there with a cubic spline.
+   The sample counts only where it is the same surface (**consistency check**): the source sees the point at the
+   projected depth (within :data:`DEPTH_TOLERANCE` plus the source's local depth slope) on the same object, and
+   inside the image.
+3. **Occlusion-aware blend.** Consistent samples are blended with the linear-in-time weights (1 − w, w); a pixel
+   that only one source sees takes that one; a pixel neither sees consistently is a *hole*.
+
+The **disagreement** of a synthesized keyframe measures how far the two warps are from the same image: the
+relative RMS difference of their luminance where both are consistent, plus the fraction of holes
+(:class:`Disagreement`); :mod:`simspad.render.warp_schedule` renders a keyframe for real where it exceeds a
+threshold. Everything is deterministic numpy (no atomics, no threads): the same sources give bit-identical
+frames.
+
+Rays that hit nothing (``Z = inf``) are handled as points at :data:`FAR_DEPTH_M`, where only rotation moves
+them; the synthesized depth is ``inf`` there again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import map_coordinates, maximum_filter, spline_filter
+
+from simspad.physics.radiometry import luminance_from_rgb
+from simspad.render.reprojection import PinholeCamera, move_points, project, unproject
+
+#: Stand-in depth (m) for rays that hit nothing: far enough that only rotation moves them.
+FAR_DEPTH_M = 1e7
+#: Relative depth mismatch (of Z) tolerated by the consistency check, on top of the source's local slope.
+DEPTH_TOLERANCE = 0.02
+#: Rounds of hole filling (each closes holes one pixel wide) after the forward splat.
+HOLE_FILL_ROUNDS = 3
+#: Side of the square tiles over which the two warps' difference is compared with the render noise, pixels.
+TILE_PX = 8
+#: A tile's noise is floored at this fraction of the frame's RMS noise (tiles a render gets noiseless, e.g. flat
+#: light, must not turn any resampling round-off into a failure).
+TILE_NOISE_FLOOR = 0.5
+#: Fraction of hole pixels that counts as one noise unit of disagreement.
+HOLE_TOLERANCE = 0.01
+#: Cubic B-spline resampling of radiance: interpolating, so an unmoved pixel keeps its value exactly.
+SPLINE_ORDER = 3
+
+
+@dataclass(frozen=True)
+class WarpSource:
+    """A rendered keyframe as the warp needs it.
+
+    Attributes
+    ----------
+    rgb : ndarray [H, W, 3] float32
+        Linear radiance.
+    depth_z : ndarray [H, W] float32
+        Depth along the optical axis, m (inf: no hit).
+    camera_to_world : ndarray (4, 4)
+    object_id : ndarray [H, W] or None
+        Per-pixel object ids (:data:`simspad.render.reprojection.OBJECT_ID_CHANNEL`).
+    object_poses : tuple of ndarray (4, 4)
+        ``object_to_world`` of animated object k at this instant, entry k − 1.
+    """
+
+    rgb: np.ndarray
+    depth_z: np.ndarray
+    camera_to_world: np.ndarray
+    object_id: np.ndarray | None = None
+    object_poses: tuple = ()
+
+
+@dataclass(frozen=True)
+class Disagreement:
+    """How far the two warps of a synthesized keyframe are from each other.
+
+    Attributes
+    ----------
+    rel_rms : float
+        RMS difference of the two warps' luminance where both are consistent, ÷ mean luminance of the frame.
+    hole_fraction : float
+        Fraction of pixels neither source sees consistently.
+    single_fraction : float
+        Fraction of pixels only one source sees (disocclusions; taken from that source alone).
+    noise_ratio : float
+        With a noise map: the largest, over :data:`TILE_PX`-pixel tiles, of the RMS difference of the two warps
+        ÷ the RMS difference two renders' Monte Carlo noise alone would give there (√2 × the tile's noise);
+        about 1 where the warps agree up to noise, whatever part of the frame goes wrong. NaN without one.
+    """
+
+    rel_rms: float
+    hole_fraction: float
+    single_fraction: float
+    noise_ratio: float = float("nan")
+
+    def score(self) -> float:
+        """One number to threshold. With a noise map: ``noise_ratio + hole_fraction / HOLE_TOLERANCE`` (in
+        units of the render noise); without: ``rel_rms + hole_fraction`` (a hole counts as a 100 % mismatch)."""
+        if np.isnan(self.noise_ratio):
+            return float(self.rel_rms + self.hole_fraction)
+        return float(self.noise_ratio + self.hole_fraction / HOLE_TOLERANCE)
+
+
+class _Prepared:
+    """A source with what every warp from it reuses: spline coefficients, finite depth, depth slope."""
+
+    def __init__(self, src: WarpSource):
+        self.src = src
+        self.coeffs = [spline_filter(np.asarray(src.rgb[..., c], dtype=np.float64), order=SPLINE_ORDER,
+                                     mode="nearest") for c in range(3)]
+        z = np.asarray(src.depth_z, dtype=np.float64)
+        self.z = np.where(np.isfinite(z), z, FAR_DEPTH_M)
+        gy, gx = np.gradient(self.z)
+        self.slope = np.maximum(np.abs(gx), np.abs(gy))
+        self.ids = None if src.object_id is None else np.rint(src.object_id).astype(np.int64)
+
+
+def prepare(src: WarpSource) -> _Prepared:
+    """Pre-compute what every warp from ``src`` reuses (call once per rendered keyframe)."""
+    return _Prepared(src)
+
+
+def _splat(camera: PinholeCamera, p: _Prepared, to_camera, to_objects) -> tuple[np.ndarray, np.ndarray]:
+    """Forward-splat source ``p``'s depth (and ids) into the target: [H·W] depth (inf: nothing landed), ids."""
+    src = p.src
+    points = unproject(camera, p.z, src.camera_to_world)
+    points = move_points(points, p.ids, list(src.object_poses), list(to_objects))
+    col, row, z = project(camera, points, to_camera)
+    ci, ri = np.rint(col), np.rint(row)
+    ok = np.isfinite(ci) & np.isfinite(ri) & (z > 0)
+    ok &= (ci >= 0) & (ci < camera.width) & (ri >= 0) & (ri < camera.height)
+    idx = (ri[ok] * camera.width + ci[ok]).astype(np.int64)
+    zs = z[ok]
+    zbuf = np.full(camera.width * camera.height, np.inf)
+    np.minimum.at(zbuf, idx, zs)
+    ids = np.zeros(camera.width * camera.height, dtype=np.int64)
+    if p.ids is not None:
+        win = zs <= zbuf[idx]
+        ids[idx[win]] = p.ids[ok][win]
+    return zbuf, ids
+
+
+def target_geometry(camera: PinholeCamera, sources: list[_Prepared], to_camera, to_objects
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Depth (m, FAR_DEPTH_M for sky), object ids and a 'covered' mask of the target, by z-buffer splatting."""
+    zbuf = np.full(camera.width * camera.height, np.inf)
+    ids = np.zeros(camera.width * camera.height, dtype=np.int64)
+    for p in sources:
+        z, i = _splat(camera, p, to_camera, to_objects)
+        nearer = z < zbuf
+        zbuf = np.where(nearer, z, zbuf)
+        ids = np.where(nearer, i, ids)
+    zbuf = zbuf.reshape(camera.height, camera.width)
+    ids = ids.reshape(camera.height, camera.width)
+    covered = np.isfinite(zbuf)
+    for _ in range(HOLE_FILL_ROUNDS):
+        holes = ~np.isfinite(zbuf)
+        if not holes.any():
+            break
+        filled = maximum_filter(np.where(np.isfinite(zbuf), zbuf, -np.inf), size=3, mode="nearest")
+        # The farthest neighbour's id goes with its depth: take it from the neighbour that holds that depth.
+        idfill = _id_of_value(zbuf, ids, filled)
+        ok = holes & np.isfinite(filled)
+        zbuf = np.where(ok, filled, zbuf)
+        ids = np.where(ok, idfill, ids)
+    return zbuf, ids, covered
+
+
+def _id_of_value(z: np.ndarray, ids: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """For each pixel, the id of a 3×3 neighbour whose depth equals ``target`` (0 if none)."""
+    out = np.zeros_like(ids)
+    zp = np.pad(z, 1, mode="edge")
+    ip = np.pad(ids, 1, mode="edge")
+    h, w = z.shape
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            zn = zp[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+            out = np.where((zn == target) & (out == 0), ip[1 + dy:1 + dy + h, 1 + dx:1 + dx + w], out)
+    return out
+
+
+def _backward(camera: PinholeCamera, p: _Prepared, target_points: np.ndarray, target_ids: np.ndarray,
+              to_objects) -> tuple[np.ndarray, np.ndarray]:
+    """Sample source ``p`` at the target's surface points: rgb [H, W, 3] and the consistency mask [H, W]."""
+    src = p.src
+    points = move_points(target_points, target_ids if p.ids is not None else None, list(to_objects),
+                         list(src.object_poses))
+    col, row, z = project(camera, points, src.camera_to_world)
+    h, w = camera.height, camera.width
+    inside = np.isfinite(col) & np.isfinite(row) & (col >= -0.5) & (col <= w - 0.5) & (row >= -0.5) & (row <= h - 0.5)
+    col = np.where(inside, col, 0.0)
+    row = np.where(inside, row, 0.0)
+    ci = np.clip(np.rint(col).astype(np.int64), 0, w - 1)
+    ri = np.clip(np.rint(row).astype(np.int64), 0, h - 1)
+    zs = p.z[ri, ci]
+    tol = DEPTH_TOLERANCE * z + 1.5 * p.slope[ri, ci]
+    valid = inside & (np.abs(z - zs) <= tol)
+    if p.ids is not None:
+        valid &= p.ids[ri, ci] == target_ids
+    coords = np.stack([row, col])
+    rgb = np.stack([map_coordinates(c, coords, order=SPLINE_ORDER, mode="nearest", prefilter=False)
+                    for c in p.coeffs], axis=-1)
+    return np.maximum(rgb, 0.0), valid
+
+
+def _same_pose(src: WarpSource, to_camera, to_objects) -> bool:
+    return (np.array_equal(src.camera_to_world, to_camera) and len(src.object_poses) == len(to_objects)
+            and all(np.array_equal(m, n) for m, n in zip(src.object_poses, to_objects)))
+
+
+def _tile_noise_ratio(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -> float:
+    """Largest tile RMS of ``diff`` (where ``both``) over √2 × the tile RMS of ``noise_y`` (floored)."""
+    h, w = diff.shape
+    th, tw = -(-h // TILE_PX), -(-w // TILE_PX)
+    pad = ((0, th * TILE_PX - h), (0, tw * TILE_PX - w))
+
+    def tiles(a):
+        return np.pad(a, pad).reshape(th, TILE_PX, tw, TILE_PX).sum(axis=(1, 3))
+
+    n = tiles(both.astype(np.float64))
+    sq = tiles(np.where(both, diff.astype(np.float64) ** 2, 0.0))
+    noise2 = tiles(np.asarray(noise_y, dtype=np.float64) ** 2) / tiles(np.ones((h, w)))
+    floor2 = (TILE_NOISE_FLOOR ** 2) * float(np.mean(np.asarray(noise_y, dtype=np.float64) ** 2))
+    enough = n >= TILE_PX * TILE_PX / 4
+    if not enough.any() or floor2 <= 0:
+        return 0.0
+    ratio = np.sqrt(sq[enough] / n[enough] / (2.0 * np.maximum(noise2[enough], floor2)))
+    return float(ratio.max())
+
+
+def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: float, to_camera: np.ndarray,
+               to_objects=(), noise_y: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, Disagreement]:
+    """The keyframe at pose ``to_camera`` between rendered keyframes ``a`` and ``b``.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    a, b : prepared sources (:func:`prepare`)
+        The rendered keyframes before and after the target.
+    weight_b : float
+        Blend weight of ``b`` in [0, 1]: (t − t_a) / (t_b − t_a).
+    to_camera : ndarray (4, 4)
+        Camera-to-world at the target instant.
+    to_objects : sequence of ndarray (4, 4)
+        ``object_to_world`` of each animated object at the target instant (as in :class:`WarpSource`).
+    noise_y : ndarray [H, W], optional
+        Monte Carlo noise (σ of luminance, absolute) of one render, per pixel: scales the disagreement
+        (:attr:`Disagreement.noise_ratio`).
+
+    Returns
+    -------
+    rgb : ndarray [H, W, 3] float32
+    depth_z : ndarray [H, W] float32 (inf: no hit)
+    object_id : ndarray [H, W] float32 or None (None when the sources carry none)
+    disagreement : Disagreement
+    """
+    for p, at in ((a, weight_b == 0.0), (b, weight_b == 1.0)):
+        if at and _same_pose(p.src, to_camera, to_objects):  # the target is that rendered keyframe
+            ids = None if p.src.object_id is None else np.asarray(p.src.object_id, dtype=np.float32).copy()
+            return (np.asarray(p.src.rgb, dtype=np.float32).copy(), np.asarray(p.src.depth_z, np.float32).copy(),
+                    ids, Disagreement(0.0, 0.0, 0.0, float("nan") if noise_y is None else 0.0))
+    z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
+    finite = np.isfinite(z)
+    z_far = np.where(finite, z, FAR_DEPTH_M)
+    points = unproject(camera, z_far, to_camera)
+    rgb_a, va = _backward(camera, a, points, ids, to_objects)
+    rgb_b, vb = _backward(camera, b, points, ids, to_objects)
+    wa = (1.0 - weight_b) * va
+    wb = weight_b * vb
+    total = wa + wb
+    hole = ~(va | vb)
+    # Holes (neither source consistent) fall back to the plain time blend of both samples; they are counted.
+    wa = np.where(hole, 1.0 - weight_b, np.where(total > 0, wa, np.where(va, 1.0, 0.0)))
+    wb = np.where(hole, weight_b, np.where(total > 0, wb, np.where(vb, 1.0, 0.0)))
+    norm = wa + wb
+    rgb = (rgb_a * wa[..., None] + rgb_b * wb[..., None]) / norm[..., None]
+    both = va & vb
+    ya, yb = luminance_from_rgb(rgb_a), luminance_from_rgb(rgb_b)
+    mean_y = float(np.mean(luminance_from_rgb(rgb), dtype=np.float64))
+    rel_rms = (float(np.sqrt(np.mean((ya[both] - yb[both]) ** 2, dtype=np.float64))) / mean_y
+               if both.any() and mean_y > 0 else 0.0)
+    n = float(z.size)
+    ratio = float("nan") if noise_y is None else _tile_noise_ratio(ya - yb, both, noise_y)
+    dis = Disagreement(rel_rms=rel_rms, hole_fraction=float(hole.sum()) / n,
+                       single_fraction=float((va ^ vb).sum()) / n, noise_ratio=ratio)
+    depth = np.where(z_far >= 0.5 * FAR_DEPTH_M, np.inf, z_far).astype(np.float32)
+    has_ids = a.ids is not None or b.ids is not None
+    return (rgb.astype(np.float32), depth, ids.astype(np.float32) if has_ids else None, dis)

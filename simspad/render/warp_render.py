@@ -1,0 +1,118 @@
+"""``--interpolation warp``: render the anchor keyframes with Mitsuba and synthesize the rest by reprojection.
+
+:func:`render_with_warps` is what :func:`simspad.render.renderer.render_sequence` calls instead of rendering every
+keyframe: it renders (or re-uses from the cache) the keyframes :mod:`simspad.render.warp_schedule` asks for,
+and writes the synthesized ones (:mod:`simspad.render.warp`) as ordinary keyframes of the render directory
+(same EXR layout: R, G, B, Z, and ``object_id`` when the scene animates objects). Rendered keyframes keep the
+names (cache keys) of a linear render, so both schedules share them; synthesized ones are keyed by the same
+fields plus the synthesis version and parameters.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from simspad.io.exr import read_exr
+from simspad.motion.trajectory import TrajectorySet
+from simspad.physics.radiometry import luminance_from_rgb
+from simspad.render.flow import object_poses
+from simspad.render.keyframe_files import frame_names, write_frame
+from simspad.render.mitsuba_scene import CompileCounter, MitsubaScene
+from simspad.render.reprojection import PinholeCamera
+from simspad.render.warp import WarpSource
+from simspad.render.warp_schedule import (
+    WARP_STRIDE,
+    WARP_THRESHOLD,
+    WarpPlanResult,
+    synthesize_keyframes,
+)
+
+#: Bumped when synthesized pixels from the same anchors would change: part of their cache key.
+WARP_VERSION = 1
+#: Floor of the per-pixel render noise, as a fraction of its mean: a noiseless render (a flat scene) must not make
+#: every synthesized keyframe fail on round-off.
+MIN_NOISE = 0.05
+#: Gaussian σ (pixels) that turns the squared difference of the two noise-probe renders into a noise level.
+NOISE_SMOOTHING_PX = 2.0
+
+
+class WarpedFrames(NamedTuple):
+    names: list  # relative file of each keyframe
+    plan: WarpPlanResult  # source of each keyframe, disagreement of the synthesized ones
+    frame_times_s: list  # wall time of each keyframe rendered now, s
+    compiled: list  # kernels new to the process while rendering each of them
+    n_reused: int  # rendered keyframes taken from the cache
+    render_s: float  # wall time of the whole loop (renders and synthesis), s
+    stride: int  # anchor spacing used, keyframes
+    threshold: float  # disagreement threshold used, in units of the render noise
+    noise: float  # Monte Carlo noise of one render (RMS ÷ mean luminance), measured at the first keyframe
+
+
+def warp_key(base_key: dict, stride: int, threshold: float) -> dict:
+    """Cache-key fields of synthesized keyframes."""
+    return dict(base_key, warp=WARP_VERSION, warp_stride=int(stride), warp_threshold=float(threshold))
+
+
+def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, cam_poses: np.ndarray,
+                      base_key: dict, out_dir: Path, seed: int, counter: CompileCounter, bar, *,
+                      stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD) -> WarpedFrames:
+    """Render and synthesize every keyframe at ``times`` into ``out_dir``; ``bar.update(1)`` per keyframe."""
+    render_names = frame_names(base_key, times)
+    warp_names = frame_names(warp_key(base_key, stride, threshold), times)
+    names = list(warp_names)
+    camera = PinholeCamera.from_fov(ms.x_fov_deg, ms.width, ms.height)
+    object_names = ms.object_names
+    frame_times, compiled, reused = [], [], [0]
+
+    def poses_of(i: int) -> tuple:
+        objects = object_poses(ts, float(times[i]))
+        return tuple(objects[k] for k in object_names)
+
+    def render(i: int) -> WarpSource:
+        names[i] = render_names[i]
+        path = out_dir / render_names[i]
+        if path.is_file():
+            reused[0] += 1
+            data = read_exr(path)
+            return WarpSource(data["rgb"], data["z"], cam_poses[i], data.get("object_id"), poses_of(i))
+        tic = time.perf_counter()
+        ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+        rgb = ms.render_radiance(seed)
+        depth, object_id = ms.render_depth_ids(seed)
+        write_frame(path, rgb, depth, object_id)
+        frame_times.append(time.perf_counter() - tic)
+        compiled.append(counter.take())
+        return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i))
+
+    def write(i: int, rgb, depth, object_id) -> None:
+        path = out_dir / warp_names[i]
+        if not path.is_file():  # synthesis is deterministic: an existing file holds these very pixels
+            write_frame(path, rgb, depth, object_id)
+
+    tic = time.perf_counter()
+    noise_y, noise = None, 0.0
+    if len(times) > 2:
+        noise_y, mean_y = render_noise(ms, ts, float(times[0]), cam_poses[0], seed)
+        noise = float(np.sqrt(np.mean(noise_y ** 2)) / mean_y) if mean_y > 0 else 0.0
+        noise_y = np.maximum(noise_y, MIN_NOISE * noise_y.mean())  # a noiseless render: round-off is no failure
+    plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
+                                stride=stride, threshold=threshold, noise_y=noise_y,
+                                on_keyframe=lambda i: bar.update(1))
+    return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
+                        noise)
+
+
+def render_noise(ms: MitsubaScene, ts: TrajectorySet, t: float, camera_to_world: np.ndarray, seed: int
+                 ) -> tuple[np.ndarray, float]:
+    """Monte Carlo noise of one render per pixel (σ of luminance, absolute), from two renders of the same pose
+    with seeds ``seed`` and ``seed + 1`` (they differ by √2 σ), smoothed over a few pixels so that it is a noise
+    *level* rather than one draw; and the mean luminance. Two more renders per sequence; they are not keyframes."""
+    ms.set_pose(camera_to_world, object_poses(ts, t))
+    y0 = luminance_from_rgb(ms.render_radiance(seed)).astype(np.float64)
+    y1 = luminance_from_rgb(ms.render_radiance(seed + 1)).astype(np.float64)
+    return np.sqrt(gaussian_filter((y1 - y0) ** 2 / 2, NOISE_SMOOTHING_PX, mode="nearest")), float(np.mean(y0))

@@ -1,0 +1,149 @@
+"""Which keyframes to render and which to synthesize (``--interpolation warp``).
+
+The keyframe instants are those of the linear schedule (:func:`simspad.render.schedule.keyframe_schedule`), so a
+warp timeline is as dense in time as a linear one; only every ``stride``-th keyframe (and the last) is rendered
+up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesize`;
+if the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.Disagreement.score`),
+the keyframe in the middle is rendered for real and both halves are treated again (recursive bisection), down
+to neighbours. Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
+``log2(stride)`` levels of re-synthesis are done per segment, and only two rendered keyframes per level are held
+in memory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simspad.render.reprojection import PinholeCamera
+from simspad.render.warp import Disagreement, WarpSource, prepare, synthesize
+
+#: Rendered keyframes are at most this many keyframes of the linear schedule apart.
+WARP_STRIDE = 16
+#: Largest disagreement score of a synthesized keyframe (:meth:`simspad.render.warp.Disagreement.score`): the worst
+#: tile's RMS difference of the two warps in units of what two renders' Monte Carlo noise alone would give (≈ 1
+#: where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
+#: mid-way blend errs by s/√2: a ratio ≤ 2 keeps the blend's error within about √2 × a render's own noise.
+WARP_THRESHOLD = 2.0
+#: ``source`` of a keyframe in ``timeline.json``.
+SOURCE_RENDER, SOURCE_WARP = "render", "warp"
+
+
+def anchor_indices(n_keyframes: int, stride: int) -> list[int]:
+    """Indices rendered up front: 0, stride, 2·stride, ..., and the last."""
+    if n_keyframes < 1 or stride < 1:
+        raise ValueError("n_keyframes and stride must be >= 1")
+    idx = list(range(0, n_keyframes, stride))
+    if idx[-1] != n_keyframes - 1:
+        idx.append(n_keyframes - 1)
+    return idx
+
+
+@dataclass
+class WarpPlanResult:
+    """What the synthesis did.
+
+    Attributes
+    ----------
+    sources : list of str
+        ``"render"`` or ``"warp"`` per keyframe.
+    disagreement : dict
+        Score of each keyframe that was finally synthesized (index → :class:`Disagreement`).
+    """
+
+    sources: list
+    disagreement: dict = field(default_factory=dict)
+
+    @property
+    def n_rendered(self) -> int:
+        return sum(s == SOURCE_RENDER for s in self.sources)
+
+
+def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Callable[[int], WarpSource],
+                         target: Callable[[int], tuple[np.ndarray, tuple]],
+                         write: Callable[[int, np.ndarray, np.ndarray, np.ndarray | None], None], *,
+                         stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
+                         noise_y: np.ndarray | None = None,
+                         on_keyframe: Callable[[int], None] | None = None) -> WarpPlanResult:
+    """Render the anchors, synthesize the rest, render where the warps disagree.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    times_s : ndarray (K,)
+        All keyframe instants, s.
+    render : callable
+        ``render(i) -> WarpSource``: render keyframe ``i`` for real (or load it from the cache) and write it.
+    target : callable
+        ``target(i) -> (camera_to_world, object_poses)`` at keyframe ``i``.
+    write : callable
+        ``write(i, rgb, depth_z, object_id)``: store synthesized keyframe ``i``.
+    stride : int
+        Rendered keyframes up front are this many keyframes apart (:data:`WARP_STRIDE`).
+    threshold : float
+        Largest :meth:`Disagreement.score` accepted (:data:`WARP_THRESHOLD`: in units of the render noise when
+        ``noise_y`` is given).
+    noise_y : ndarray [H, W], optional
+        Monte Carlo noise of one render per pixel (absolute σ of luminance), see :func:`simspad.render.warp.synthesize`.
+    on_keyframe : callable, optional
+        Called with each keyframe index once it is final (progress).
+
+    Returns
+    -------
+    WarpPlanResult
+    """
+    times = np.asarray(times_s, dtype=np.float64)
+    n = times.size
+    sources = [SOURCE_WARP] * n
+    result = WarpPlanResult(sources)
+    tick = on_keyframe or (lambda i: None)
+
+    def rendered(i: int):
+        sources[i] = SOURCE_RENDER
+        p = prepare(render(i))
+        tick(i)
+        return p
+
+    def fill(i0: int, p0, i1: int, p1) -> None:
+        if i1 - i0 <= 1:
+            return
+        frames = {}
+        for i in range(i0 + 1, i1):
+            pose, objects = target(i)
+            w = float((times[i] - times[i0]) / (times[i1] - times[i0]))
+            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y)
+        worst = max(f[3].score() for f in frames.values())
+        if worst <= threshold:
+            for i, (rgb, depth, ids, dis) in frames.items():
+                write(i, rgb, depth, ids)
+                result.disagreement[i] = dis
+                tick(i)
+            return
+        del frames
+        m = (i0 + i1) // 2
+        pm = rendered(m)
+        fill(i0, p0, m, pm)
+        fill(m, pm, i1, p1)
+
+    anchors = anchor_indices(n, stride)
+    prev_i, prev_p = anchors[0], rendered(anchors[0])
+    for i in anchors[1:]:
+        p = rendered(i)
+        fill(prev_i, prev_p, i, p)
+        prev_i, prev_p = i, p
+    return result
+
+
+def describe_disagreement(dis: dict) -> dict:
+    """Summary of the synthesized keyframes' disagreement for ``timeline.json`` (max and median scores)."""
+    if not dis:
+        return {"n_warped": 0}
+    scores = np.array([d.score() for d in dis.values()])
+    return {"n_warped": len(dis), "max_score": float(scores.max()), "median_score": float(np.median(scores)),
+            "max_hole_fraction": float(max(d.hole_fraction for d in dis.values()))}
+
+
+__all__ = ["SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE", "WARP_THRESHOLD", "Disagreement", "WarpPlanResult",
+           "anchor_indices", "describe_disagreement", "synthesize_keyframes"]
