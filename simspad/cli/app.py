@@ -88,11 +88,15 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True)
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler (dask executor).")
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
-def generate(spec, out_dir, executor, scheduler, workers):
+@click.option("--estimate", "estimate_only", is_flag=True,
+              help="Print keyframes, CPU-hours, wall time, disk and peak memory (measured here) and stop.")
+@click.option("--yes", "assume_yes", is_flag=True, help="Run even if the dataset will not fit the free disk.")
+def generate(spec, out_dir, executor, scheduler, workers, estimate_only, assume_yes):
     """Generate a dataset from SPEC (default: the embedded datasets/mini.toml)."""
     from simspad.cli.generate import generate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers)
+    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers,
+                      estimate_only=estimate_only, assume_yes=assume_yes)
 
 
 @cli.command()

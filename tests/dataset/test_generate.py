@@ -250,3 +250,56 @@ def test_corrupted_recording_is_redone_and_foreign_manifest_refused(tiny):
     (foreign / "manifest.json").write_text('{"format": "something-else"}')
     with pytest.raises(InputError, match="format"):
         generate(load_spec(spec_path), foreign, progress=False)
+
+
+def test_one_worker_resumes_partial_render_identically(tiny):
+    """Chunks of keyframes: one worker gives the bytes two gave, and a restart keeps the keyframes a killed run
+    finished (render a is left half done without its timeline.json, render b is gone)."""
+    root, _, out, _ = tiny
+    target = root / "partial"
+    shutil.copytree(out / "renders", target / "renders")
+    render_a, render_b = sorted((target / "renders").iterdir())
+    (render_a / "timeline.json").unlink()
+    frames_a = sorted((render_a / "frames").iterdir())
+    for p in frames_a[1::2]:
+        p.unlink()
+    kept = {p.name: _stat(render_a / "frames", p.name) for p in frames_a[0::2]}
+    shutil.rmtree(render_b)
+    spec_path = _write_spec(root / "partial.toml", lux=(1,))
+    res = generate(load_spec(spec_path), target, ExecutorConfig("local", workers=1), progress=False,
+                   created_utc=CREATED)
+    assert sorted(res.done) == ["recordings/a/a_1lx.h5", "recordings/b/b_1lx.h5"] and len(res.renders_done) == 2
+    assert {name: _stat(render_a / "frames", name) for name in kept} == kept  # re-used, not re-rendered
+    assert _renders_digest(target) == _renders_digest(out)
+    assert (render_a / "timeline.json").read_bytes() == (out / "renders" / render_a.name / "timeline.json").read_bytes()
+    for rel in res.done:
+        assert file_sha256(target / rel) == file_sha256(out / rel), rel
+
+
+def test_dead_worker_is_retried_once_then_failed(tiny, monkeypatch):
+    """A worker SIGKILLed under a task (as by the OOM killer) breaks the local pool: the pool is replaced, the task
+    retried once alone; a task that dies twice is marked failed and the rest of the run finishes."""
+    root, spec_path, out, _ = tiny
+    work = root / "dead"
+    shutil.copytree(out, work)
+    for rel in ("recordings/a/a_1lx.h5", "recordings/b/b_1lx.h5"):
+        (work / rel).unlink()
+    render_b = next(p for p in (work / "renders").iterdir() if p.name.startswith("b-"))
+    shutil.rmtree(render_b)
+    monkeypatch.setenv("SIMSPAD_KILL_WORKER", ",".join([
+        "simulate:recordings/a/a_1lx.h5",  # dies every time
+        f"simulate:recordings/b/b_1lx.h5@{root / 'dead-sim-once'}",
+        f"render:b:0@{root / 'dead-render-once'}"]))
+    res = generate(load_spec(spec_path), work, ExecutorConfig("local", workers=2), progress=False, check=False)
+    assert (root / "dead-sim-once").exists() and (root / "dead-render-once").exists()  # both hooks fired
+    assert res.failed == ["recordings/a/a_1lx.h5"]
+    assert sorted(res.done) == ["recordings/b/b_100lx.h5", "recordings/b/b_1lx.h5"]
+    entries = {e["path"]: e for e in read_manifest(work)["recordings"]}
+    assert entries["recordings/a/a_1lx.h5"]["status"] == "failed"
+    assert "worker process died" in entries["recordings/a/a_1lx.h5"]["error"]
+    for rel in res.done:
+        assert entries[rel]["status"] == "complete" and file_sha256(work / rel) == file_sha256(out / rel)
+    with pytest.raises(SimSpadError, match="1 of 4 recordings failed"):
+        from simspad.dataset.generate import raise_for_failures
+
+        raise_for_failures(res)
