@@ -27,11 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from simspad.dataset.fault_injection import maybe_inject_fault
 from simspad.errors import SimSpadError
 from simspad.io.hashing import file_sha256
-from simspad.render.mitsuba_env import select_variant
-from simspad.dataset.fault_injection import maybe_inject_fault
 from simspad.render.keyframe_files import make_out_dir
+from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import RenderPlan
 from simspad.render.renderer import plan_render, render_keyframes
 from simspad.render.settings import RenderSettings

@@ -1,8 +1,11 @@
 """Dataset generation (``simspad generate``): render each sequence once, simulate every sequence × lux.
 
-The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`): one render per sequence
-(shared by all lux levels and sensors) into ``<out>/renders/<sequence>-<hash>/``, then one simulation per
-(sequence, lux) into ``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. The driver (this module, in the
+The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`) through the driver's
+:class:`~simspad.dataset.task_queue.TaskQueue`: one render per sequence (shared by all lux levels and sensors) into
+``<out>/renders/<sequence>-<hash>/`` — a plan task, then chunks of keyframes spread over every worker, then
+``timeline.json`` written here once every chunk is back — then one simulation per (sequence, lux) into
+``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. Keyframes are written under their final names (each
+atomically), so a killed run's keyframes are kept and the next run renders only the missing ones. The driver (this module, in the
 calling process,
 with :mod:`~simspad.dataset.manifest_state`) is the only writer of ``manifest.json``, which it rewrites atomically as results arrive.
 

@@ -30,8 +30,20 @@ from simspad.errors import SimSpadError
 from simspad.io.render_dir import write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
-from simspad.render.flow import camera_poses, max_step_flow, near_depth, object_poses, predicted_flow_fn
-from simspad.render.keyframe_files import frame_names, make_out_dir, remove_created, remove_stale_frames, write_frame
+from simspad.render.flow import (
+    camera_poses,
+    max_step_flow,
+    near_depth,
+    object_poses,
+    predicted_flow_fn,
+)
+from simspad.render.keyframe_files import (
+    frame_names,
+    make_out_dir,
+    remove_created,
+    remove_stale_frames,
+    write_frame,
+)
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.mitsuba_scene import (
     DEPTH_SPP,
