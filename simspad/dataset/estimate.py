@@ -116,6 +116,8 @@ class UnitCosts:
     sim_s_per: dict = field(default_factory=dict)
     bytes_per: dict = field(default_factory=dict)  # also "gt": bytes per MP·frame
     events_per_mp_s: float = 0.0
+    recording_fixed_s: float = 0.0  # per recording, beyond the per-unit costs
+    recording_fixed_bytes: float = 0.0
     sim_rss_bytes_per_mp: float | None = None  # peak-RSS growth of a simulation with its pixel count
     sim_process_rss_bytes: int | None = None  # peak RSS of the probing process (imports, numba, buffers)
     calibration_s: float = 0.0
@@ -189,7 +191,7 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
 
     run(list(params), half)  # imports and JIT compilation, untimed
     with _PeakRss() as peak:
-        run(list(params), full)
+        t_all, p_all = run(list(params), full)
     if peak.bytes is not None:
         costs.sim_rss_bytes_per_mp = peak.bytes / mp
     costs.sim_process_rss_bytes = _vm_hwm_bytes()
@@ -215,6 +217,17 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
                 continue
         costs.sim_s_per[kind] = dt / units
         costs.bytes_per[kind] = db / units
+    # What a recording costs beyond its per-unit parts (file creation, attributes, poses, reading the render):
+    # the all-sensor probe minus its units at the marginal costs.
+    with open_recording(p_all) as r:
+        units_full = {"spad": r.spad.n_bins * w * h / 1e9 if "spad" in params else 0.0,
+                      "frames": r.frames.n_frames * mp if "frames" in params else 0.0,
+                      "events": mp * full if "events" in params else 0.0}
+    gt_full = mp * full * gt_rate_hz
+    costs.recording_fixed_s = max(t_all - costs.gt_s_per_mp_frame * gt_full - sum(
+        costs.sim_s_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
+    costs.recording_fixed_bytes = max(p_all.stat().st_size - costs.bytes_per["gt"] * gt_full - sum(
+        costs.bytes_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
 
 
 def measure_unit_costs(spec, log=lambda msg: None) -> UnitCosts:
@@ -315,7 +328,8 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         w, h = size_of[rec.render_rel_dir]
         mp = w * h / 1e6
         gt_units = mp * rec.duration_s * rec.gt_rate_hz
-        t, b = costs.gt_s_per_mp_frame * gt_units, costs.bytes_per.get("gt", 0.0) * gt_units
+        t = costs.recording_fixed_s + costs.gt_s_per_mp_frame * gt_units
+        b = costs.recording_fixed_bytes + costs.bytes_per.get("gt", 0.0) * gt_units
         units = {}
         if spad is not None:
             gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
@@ -360,7 +374,7 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
                     free_bytes: int | None = None) -> str:
     """The estimate as printed by ``simspad generate --estimate`` (and ``benchmarks/bench_generate.py``)."""
     def hours(s):
-        return f"{s / 3600:.2f} h" if s >= 3600 else f"{s / 60:.1f} min"
+        return f"{s / 3600:.2f} h" if s >= 3600 else f"{s / 60:.1f} min" if s >= 60 else f"{s:.0f} s"
 
     def size(b):
         return f"{b / 1024**3:.2f} GiB" if b >= 1024**3 else f"{b / MIB:.1f} MiB"
