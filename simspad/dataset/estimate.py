@@ -6,16 +6,17 @@ spec's sizes.
 - **Keyframes** are exact: each sequence's render is planned at its full size (:func:`plan_render`: the adaptive
   schedule from the predicted image motion), which writes nothing.
 - **Render time** per keyframe: a calibration render of a few keyframes of each scene along its own trajectory,
-  on one thread, at two small sizes, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene traversal, depth
-  pass, EXR write; variable part: path tracing).
+  on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
+  traversal, depth pass, EXR write; variable part: path tracing).
 - **Simulation time**: one throughput probe of the spec's sensors on a small render (ground truth, SPAD, frames,
   events), measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by
-  Gbit of SPAD data, megapixel-frames and megapixel-seconds.
-- **Disk**: SPAD bits, frames and ground truth exactly from the sizes; events from the probe's measured event
-  rate; renders from the calibration EXRs' bytes per pixel.
+  Gbit of SPAD data, megapixel-frames and megapixel-seconds; plus a per-recording fixed part (the all-sensor
+  probe minus its units at the marginal costs).
+- **Disk**: the probe files' bytes per unit (the same marginal fit, so compression counts) and per recording;
+  renders from the calibration EXRs' bytes per pixel.
 - **Peak memory** per worker: the kernel's peak-RSS counter (``VmHWM``, reset through ``/proc/self/clear_refs``)
-  around the calibration render and the probe, scaled by pixels·spp (render) and pixels (simulation, which
-  streams in time).
+  around the calibration renders (growth between the two sample counts, scaled by pixels·spp) and the probe
+  (scaled by pixels: a simulation streams in time), on top of the calibrating process's own peak.
 
 :func:`measure_unit_costs` takes ~1 min on 2 cores for three scenes; :func:`estimate_spec` turns the costs into
 the figures of one spec.
@@ -33,7 +34,27 @@ from pathlib import Path
 
 import numpy as np
 
-from simspad.dataset.executors import default_workers, job_environment
+from simspad.dataset.directory import recording_rel_path
+from simspad.dataset.executors import (
+    default_workers,
+    job_environment,
+    render_settings_of,
+)
+from simspad.dataset.plan import make_plan
+from simspad.io.recording import open_recording
+from simspad.physics.radiometry import Optics
+from simspad.render.mitsuba_env import select_variant
+from simspad.render.render_plan import chunk_size_for
+from simspad.render.renderer import (
+    load_scene,
+    plan_render,
+    render_keyframes,
+    render_sequence,
+)
+from simspad.render.settings import RenderSettings
+from simspad.scenes.library import resolve_scene
+from simspad.sensors.simulate import RecordingSettings, simulate_recording
+from simspad.sensors.spad import n_bins
 
 #: Calibration render: width (px), keyframes timed per sample count (after one untimed keyframe that compiles
 #: the kernels), the two sample counts whose difference separates the per-sample cost from the fixed one, and the
@@ -124,7 +145,6 @@ class UnitCosts:
 
 
 def _settings(seq, resolution, duration_s, spp):
-    from simspad.render.settings import RenderSettings
 
     return RenderSettings(duration_s=duration_s, start_s=seq.start_s, resolution=tuple(resolution), spp=spp,
                           max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=1)
@@ -135,7 +155,6 @@ def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
     (one scene load), one thread."""
     import drjit as dr  # deferred: heavy; the variant is already set
 
-    from simspad.render.renderer import load_scene, plan_render, render_keyframes
 
     dr.set_thread_count(1)  # per-core cost: workers render with one thread each
     w = CALIBRATION_WIDTH_PX
@@ -166,10 +185,6 @@ def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
 
 def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
     """Marginal simulation costs of the spec's sensors on a small render of ``seq``."""
-    from simspad.io.recording import open_recording
-    from simspad.physics.radiometry import Optics
-    from simspad.render.renderer import render_sequence
-    from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
     w, h = PROBE_SIZE_PX
     mp = w * h / 1e6
@@ -232,8 +247,6 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
 
 def measure_unit_costs(spec, log=lambda msg: None) -> UnitCosts:
     """Calibrate render costs for every scene of ``spec`` and probe its sensors' simulation costs (≈ 1 min)."""
-    from simspad.render.mitsuba_env import select_variant
-    from simspad.scenes.library import resolve_scene
 
     for key, value in job_environment().items():
         os.environ.setdefault(key, value)
@@ -282,7 +295,6 @@ class Estimate:
     def wall_s(self, workers: int) -> float:
         """Wall time on ``workers`` single-core workers: renders in chunks of keyframes over all of them (at
         worst one chunk's time after the last), then the simulations (at best the longest one)."""
-        from simspad.render.render_plan import chunk_size_for
 
         chunk_tail = max((s * chunk_size_for(n, workers) for s, n in self.keyframe_s), default=0.0)
         render = self.render_cpu_s / workers + chunk_tail if self.render_cpu_s else 0.0
@@ -297,11 +309,6 @@ class Estimate:
 
 def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     """Exact keyframe counts (each render planned at full size) and sizes, with ``costs`` for time and memory."""
-    from simspad.dataset.executors import _render_settings
-    from simspad.dataset.plan import make_plan
-    from simspad.render.renderer import plan_render
-    from simspad.scenes.library import resolve_scene
-    from simspad.sensors.spad import n_bins
 
     t0 = time.perf_counter()
     plan = make_plan(spec, "1970-01-01T00:00:00Z")
@@ -309,7 +316,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     size_of = {}
     for r in plan.renders:
         seq = r.sequence
-        rp = plan_render(seq.scene, seq.trajectory, _render_settings(r))
+        rp = plan_render(seq.scene, seq.trajectory, render_settings_of(r))
         cost = costs.render[resolve_scene(seq.scene).name]
         w, h = seq.resolution
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
@@ -397,7 +404,9 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
     peak = est.peak_memory_bytes(workers)
     if peak is not None:
         per = max(b for b in (est.peak_render_rss_bytes, est.peak_sim_rss_bytes) if b is not None)
-        lines.append(f"  peak memory  {size(peak)} ({workers} worker(s) × {size(per)})")
+        total = total_memory_bytes()
+        lines.append(f"  peak memory  {size(peak)} ({workers} worker(s) × {size(per)})"
+                     + (f"; this machine has {size(total)}" if total else ""))
     lines.append("  unit costs   render s/keyframe (one core): " + ", ".join(
         f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp" for name, c in costs.render.items()))
     sim = [f"{k} {v:.3g} s/" + {"spad": "Gbit", "frames": "MP·frame", "events": "MP·s"}[k]
@@ -411,8 +420,6 @@ def disk_needed_bytes(spec, out_dir) -> int:
     bit-planes (one bit per pixel and bin), frames (2 bytes per pixel) and ground truth (4 bytes per pixel and
     frame), uncompressed. Events and renders are left out (they need :func:`measure_unit_costs`), so this is the
     quick check ``generate`` makes before every run."""
-    from simspad.dataset.directory import recording_rel_path
-    from simspad.sensors.spad import n_bins
 
     spad, frames = spec.sensors.get("spad"), spec.sensors.get("frames")
     total = 0

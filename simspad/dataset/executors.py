@@ -66,7 +66,7 @@ def _error_result(exc: BaseException, t0: float) -> dict[str, Any]:
             "host": socket.gethostname()}
 
 
-def _render_settings(task) -> RenderSettings:
+def render_settings_of(task) -> RenderSettings:
     seq = task.sequence
     return RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s, resolution=tuple(seq.resolution),
                           spp=seq.spp, max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=task.seed)
@@ -104,7 +104,7 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         select_variant()
         seq = task.sequence
         final = Path(out_dir) / task.rel_dir
-        plan = plan_render(seq.scene, seq.trajectory, _render_settings(task), spad_bin_s=SpadParams().bin_s)
+        plan = plan_render(seq.scene, seq.trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
         make_out_dir(final)
         existing = [i for i, name in enumerate(plan.names) if (final / name).is_file()]
         return {"ok": True, "plan": plan.to_dict(), "n_keyframes": plan.n_keyframes, "existing": existing,
