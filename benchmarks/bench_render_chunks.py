@@ -29,6 +29,7 @@ from simspad.dataset.executors import LocalExecutor, job_environment  # noqa: E4
 from simspad.dataset.task_queue import Job, TaskQueue  # noqa: E402
 from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks  # noqa: E402
 from simspad.render.renderer import finalize_render  # noqa: E402
+from simspad.render.settings import RenderSettings  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -91,7 +92,9 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=0.02)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     args = ap.parse_args(argv)
-    seq = _Sequence("bench", args.scene, None, args.duration, 0.0, tuple(args.resolution), args.spp, 0.5, 0.0)
+    defaults = RenderSettings(duration_s=args.duration)
+    seq = _Sequence("bench", args.scene, None, args.duration, 0.0, tuple(args.resolution), args.spp,
+                    defaults.max_flow_px, defaults.min_rate_hz)
     task = _RenderTask(seq, "0" * 64, "renders/bench", 1)
     print(f"one sequence: {args.scene}, {args.resolution[0]}×{args.resolution[1]} px, {args.spp} spp, "
           f"{args.duration * 1e3:g} ms; {os.cpu_count()} cores")
