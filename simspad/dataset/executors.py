@@ -259,7 +259,7 @@ class DaskExecutor:
     """dask.distributed: join a running scheduler (``scheduler`` address) or start a LocalCluster.
 
     Every worker must see the output directory at the same path (a shared file system on a cluster) and have
-    SimSPAD installed. Dask schedules the tasks itself; ``sim_slots`` does not throttle.
+    SimSPAD installed. Dask schedules the tasks itself; ``slots`` does not throttle.
     """
 
     name = "dask"
