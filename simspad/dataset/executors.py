@@ -121,9 +121,10 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
     Returns
     -------
     dict
-        ``ok``, ``n_rendered``, ``n_reused``, ``seconds``, ``host``; or ``ok=False`` and ``error``.
+        ``ok``, ``n_rendered``, ``n_reused``, ``seconds`` (wall), ``cpu_s`` (CPU time of this process, all
+        threads), ``pid``, ``host``; or ``ok=False`` and ``error``.
     """
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         _apply_environment(env)
         maybe_inject_fault(f"render:{task.sequence.name}:{indices[0]}")
@@ -133,7 +134,8 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         done = render_keyframes(seq.scene, seq.trajectory, RenderPlan.from_dict(plan), indices,
                                 out_dir=Path(out_dir) / task.rel_dir)
         return {"ok": True, "n_rendered": len(done.frame_times_s), "n_reused": done.n_reused,
-                "seconds": time.perf_counter() - t0, "host": socket.gethostname()}
+                "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),
+                "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
 
