@@ -122,6 +122,7 @@ class SceneRenderCost:
     exr_bytes_per_px: float
     rss_bytes_per_mp_spp: float | None  # peak-RSS growth with the sample wavefront
     process_rss_bytes: int | None  # peak RSS of the calibrating process (imports, scene, renders)
+    load_s: float = 0.0  # CPU seconds to load the scene (once per chunk of keyframes)
 
     def seconds_per_keyframe(self, megapixels: float, spp: int) -> float:
         return self.a_s + self.b_s * megapixels * spp
@@ -160,7 +161,9 @@ def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
     w = CALIBRATION_WIDTH_PX
     h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
     span_s = min(seq.duration_s, CALIBRATION_SPAN_S)
+    cpu0 = time.process_time()
     loaded = load_scene(seq.scene, seq.trajectory, w, h, CALIBRATION_SPP[0])
+    load_s = time.process_time() - cpu0  # every chunk of keyframes loads the scene once
     points, exr, rss = [], [], []
     for spp in CALIBRATION_SPP:
         loaded.ms.spp = spp  # mi.render takes the sample count per call; same scene, same film
@@ -181,7 +184,7 @@ def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
     a = max(y1 - b * x1, 0.0)
     slope = None if None in rss else max(rss[1] - rss[0], 0) / (x2 - x1)
     return SceneRenderCost(a_s=a, b_s=b, exr_bytes_per_px=float(np.mean(exr)), rss_bytes_per_mp_spp=slope,
-                           process_rss_bytes=_vm_hwm_bytes())
+                           process_rss_bytes=_vm_hwm_bytes(), load_s=load_s)
 
 
 def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
@@ -285,7 +288,8 @@ class Estimate:
     sim_cpu_s: float
     longest_sim_s: float
     largest_render_cpu_s: float
-    keyframe_s: list  # seconds per keyframe of each render (one core)
+    keyframe_s: list  # (seconds per keyframe on one core, keyframes) of each render
+    scene_load_s: list  # (seconds to load the scene, keyframes) of each render: paid once per chunk
     disk_bytes: int
     recordings_bytes: int
     renders_bytes: int
@@ -303,7 +307,8 @@ class Estimate:
         worst one chunk's time after the last), then the simulations (at best the longest one)."""
 
         chunk_tail = max((s * chunk_size_for(n, workers) for s, n in self.keyframe_s), default=0.0)
-        render = self.render_cpu_s / workers + chunk_tail if self.render_cpu_s else 0.0
+        loads = sum(load * math.ceil(n / chunk_size_for(n, workers)) for load, n in self.scene_load_s)
+        render = (self.render_cpu_s + loads) / workers + chunk_tail if self.render_cpu_s else 0.0
         sims = max(self.sim_cpu_s / workers, self.longest_sim_s)
         return render + sims
 
@@ -318,7 +323,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
 
     t0 = time.perf_counter()
     plan = make_plan(spec, "1970-01-01T00:00:00Z")
-    keyframe_s, render_cpu, renders_bytes, largest, render_rss = [], 0.0, 0, 0.0, None
+    keyframe_s, scene_load_s, render_cpu, renders_bytes, largest, render_rss = [], [], 0.0, 0, 0.0, None
     size_of = {}
     for r in plan.renders:
         seq = r.sequence
@@ -327,6 +332,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         w, h = seq.resolution
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
         keyframe_s.append((per_kf, rp.n_keyframes))
+        scene_load_s.append((cost.load_s, rp.n_keyframes))
         render_cpu += per_kf * rp.n_keyframes
         largest = max(largest, per_kf * rp.n_keyframes)
         renders_bytes += int(cost.exr_bytes_per_px * w * h * rp.n_keyframes)
@@ -362,6 +368,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     return Estimate(n_renders=len(plan.renders), n_keyframes=sum(n for _, n in keyframe_s),
                     n_recordings=len(plan.recordings), render_cpu_s=render_cpu, sim_cpu_s=sim_cpu,
                     longest_sim_s=longest, largest_render_cpu_s=largest, keyframe_s=keyframe_s,
+                    scene_load_s=scene_load_s,
                     disk_bytes=int(rec_bytes) + renders_bytes, recordings_bytes=int(rec_bytes),
                     renders_bytes=renders_bytes, peak_render_rss_bytes=render_rss, peak_sim_rss_bytes=sim_rss,
                     cores=default_workers(), plan_s=plan_s)
@@ -414,7 +421,8 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
         lines.append(f"  peak memory  {size(peak)} ({workers} worker(s) × {size(per)})"
                      + (f"; this machine has {size(total)}" if total else ""))
     lines.append("  unit costs   render s/keyframe (one core): " + ", ".join(
-        f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp" for name, c in costs.render.items()))
+        f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp (scene load {c.load_s:.1f} s per chunk)"
+        for name, c in costs.render.items()))
     sim = [f"{k} {v:.3g} s/" + {"spad": "Gbit", "frames": "MP·frame", "events": "MP·s"}[k]
            for k, v in costs.sim_s_per.items()]
     lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]))
