@@ -33,7 +33,7 @@ from simspad.io.hashing import file_sha256
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import RenderPlan
-from simspad.render.renderer import plan_render, render_keyframes
+from simspad.render.renderer import load_scene, plan_render, render_keyframes
 from simspad.render.settings import RenderSettings
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
@@ -113,6 +113,20 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         return _error_result(exc, t0)
 
 
+#: The scene this worker process loaded last: the next chunk of the same render skips the reload (a keyframe's
+#: pixels depend only on its pose and the plan's seed, not on what this process rendered before).
+_SCENE_CACHE: dict = {}
+
+
+def _cached_scene(seq, plan: RenderPlan):
+    key = (repr(seq.scene), repr(seq.trajectory), plan.width, plan.height, plan.spp, plan.variant, plan.scene_hash,
+           plan.trajectory_hash)
+    if key not in _SCENE_CACHE:
+        _SCENE_CACHE.clear()
+        _SCENE_CACHE[key] = load_scene(seq.scene, seq.trajectory, plan.width, plan.height, plan.spp, plan.variant)
+    return _SCENE_CACHE[key]
+
+
 def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: dict[str, str],
                      threads: int | None = None) -> dict[str, Any]:
     """Render the keyframes ``indices`` of a planned render (stage 2) into ``<out_dir>/<task.rel_dir>``, each
@@ -131,8 +145,9 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         select_variant()
         _set_render_threads(threads)
         seq = task.sequence
-        done = render_keyframes(seq.scene, seq.trajectory, RenderPlan.from_dict(plan), indices,
-                                out_dir=Path(out_dir) / task.rel_dir)
+        render_plan = RenderPlan.from_dict(plan)
+        done = render_keyframes(seq.scene, seq.trajectory, render_plan, indices, out_dir=Path(out_dir) / task.rel_dir,
+                                loaded=_cached_scene(seq, render_plan))
         return {"ok": True, "n_rendered": len(done.frame_times_s), "n_reused": done.n_reused,
                 "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),
                 "host": socket.gethostname()}
