@@ -115,14 +115,18 @@ def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler (dask executor).")
 @click.option("--workers", type=int, default=None, help="Worker processes (default: from the core count).")
 @click.option("--prune", is_flag=True, help="Delete recordings and renders that the changed spec no longer lists.")
-def generate(spec, out_dir, executor, scheduler, workers, prune):
+@click.option("--estimate", "estimate_only", is_flag=True,
+              help="Print keyframes, CPU-hours, wall time, disk and peak memory (measured here) and stop.")
+@click.option("--yes", "assume_yes", is_flag=True, help="Run even if the dataset will not fit the free disk.")
+def generate(spec, out_dir, executor, scheduler, workers, prune, estimate_only, assume_yes):
     """Generate a dataset from SPEC: a spec file or a bundled spec's name (default: mini).
 
     Bundled specs: mini (the default, minutes on a laptop), simspad (paper scale).
     """
     from simspad.cli.generate import generate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers, prune=prune)
+    generate_from_cli(spec, out_dir=out_dir, executor=executor, scheduler=scheduler, workers=workers, prune=prune,
+                      estimate_only=estimate_only, assume_yes=assume_yes)
 
 
 @cli.command()

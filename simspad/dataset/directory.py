@@ -80,6 +80,11 @@ def remove_temporaries(out_dir: Path) -> list[Path]:
     rec_root = out_dir / RECORDINGS_DIR
     if rec_root.is_dir():
         roots += [p for p in rec_root.iterdir() if p.is_dir()]
+    ren_root = out_dir / RENDERS_DIR
+    if ren_root.is_dir():  # keyframes and timeline.json are written in place (each atomically): a killed render
+        for p in ren_root.iterdir():  # leaves its temporary names there
+            if p.is_dir() and not p.is_symlink() and not _TMP_NAME.match(p.name):
+                roots += [p, p / "frames"]
     for root in roots:
         if not root.is_dir():
             continue

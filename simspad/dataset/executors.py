@@ -1,14 +1,14 @@
 """Where dataset work runs: worker-side task functions and the ``local`` and ``dask`` executors.
 
-Task functions (:func:`run_render`, :func:`run_simulation`) run inside a worker process (a local pool process or
+Task functions (:func:`run_render_plan`, :func:`run_render_chunk`, :func:`run_simulation`) run inside a worker process (a local pool process or
 a Dask worker, possibly on another machine). They take plain picklable task descriptions, apply the job's
 environment (``DRJIT_LIBLLVM_PATH``) before Mitsuba is imported, choose the Mitsuba variant inside the worker,
 write their output atomically, and never raise: they return a dict with ``ok`` and either results or a one-line
 ``error``, so an exception that does not pickle cannot hang the job.
 
 Executors expose one small interface used by :mod:`simspad.dataset.generate`:
-``submit_render(task)``, ``submit_simulation(task)``, ``wait(futures) -> done``, ``result(future)``,
-``sim_slots(renders_running)`` (how many simulations may run now) and ``close()``.
+``submit_render_plan(task)``, ``submit_render_chunk(task, plan, indices)``, ``submit_simulation(task)``,
+``wait(futures) -> done``, ``result(future)``, ``slots()`` (how many tasks may run at once) and ``close()``.
 """
 
 from __future__ import annotations
@@ -16,22 +16,24 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import ctypes
-import json
 import multiprocessing
 import os
 import signal
 import socket
+import sys
 import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from simspad.dataset.fault_injection import maybe_inject_fault
 from simspad.errors import SimSpadError
-from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
+from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
-from simspad.render.renderer import render_sequence
+from simspad.render.render_plan import RenderPlan
+from simspad.render.renderer import load_scene, plan_render, render_keyframes
 from simspad.render.settings import RenderSettings
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
@@ -64,13 +66,35 @@ def _error_result(exc: BaseException, t0: float) -> dict[str, Any]:
             "host": socket.gethostname()}
 
 
-def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
-    """Render one sequence into ``<out_dir>/<task.rel_dir>`` (atomically: a temporary directory, then a rename).
+def render_settings_of(task) -> RenderSettings:
+    seq = task.sequence
+    return RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s, resolution=tuple(seq.resolution),
+                          spp=seq.spp, max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=task.seed)
+
+
+def _set_render_threads(threads: int | None) -> None:
+    """Give Dr.Jit's thread pool ``threads`` threads (None: the Dask worker's own thread count, else every core),
+    so render processes side by side do not oversubscribe the cores. Pixels do not depend on the thread count."""
+    if threads is None:
+        threads = default_workers()
+        if "distributed" in sys.modules:  # inside a Dask worker: its nthreads is this task's share of the node
+            with contextlib.suppress(Exception):
+                threads = int(sys.modules["distributed"].get_worker().state.nthreads)
+    with contextlib.suppress(Exception):
+        import drjit as dr  # deferred: heavy, and only after the variant (and libLLVM path) is set
+
+        dr.set_thread_count(max(1, int(threads)))
+
+
+def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
+    """Plan the render of one sequence (stage 1, :func:`~simspad.render.renderer.plan_render`) and create its
+    directory under ``<out_dir>/<task.rel_dir>``; keyframes already there (a killed run's) are kept and counted.
 
     Returns
     -------
     dict
-        ``ok``, ``seconds`` (wall time), ``n_keyframes``, ``host``; or ``ok=False`` and ``error``.
+        ``ok``, ``plan`` (:meth:`RenderPlan.to_dict`), ``n_keyframes``, ``existing`` (indices whose file is
+        already there), ``seconds``, ``host``; or ``ok=False`` and ``error``.
     """
     t0 = time.perf_counter()
     try:
@@ -80,24 +104,55 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         select_variant()
         seq = task.sequence
         final = Path(out_dir) / task.rel_dir
-        if not (final / "timeline.json").is_file():
-            with atomic_path(final) as tmp:
-                settings = RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s,
-                                          resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
-                                          min_rate_hz=seq.min_rate_hz, seed=task.seed)
-                render_sequence(seq.scene, seq.trajectory, settings, out_dir=tmp, progress=False,
-                                spad_bin_s=SpadParams().bin_s)
-        return {"ok": True, "seconds": time.perf_counter() - t0, "n_keyframes": _count_keyframes(final),
-                "host": socket.gethostname()}
+        plan = plan_render(seq.scene, seq.trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
+        make_out_dir(final)
+        existing = [i for i, name in enumerate(plan.names) if (final / name).is_file()]
+        return {"ok": True, "plan": plan.to_dict(), "n_keyframes": plan.n_keyframes, "existing": existing,
+                "seconds": time.perf_counter() - t0, "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
 
 
-def _count_keyframes(render_dir: Path) -> int | None:
+#: The scene this worker process loaded last: the next chunk of the same render skips the reload (a keyframe's
+#: pixels depend only on its pose and the plan's seed, not on what this process rendered before).
+_SCENE_CACHE: dict = {}
+
+
+def _cached_scene(seq, plan: RenderPlan):
+    key = (repr(seq.scene), repr(seq.trajectory), plan.width, plan.height, plan.spp, plan.variant, plan.scene_hash,
+           plan.trajectory_hash)
+    if key not in _SCENE_CACHE:
+        _SCENE_CACHE.clear()
+        _SCENE_CACHE[key] = load_scene(seq.scene, seq.trajectory, plan.width, plan.height, plan.spp, plan.variant)
+    return _SCENE_CACHE[key]
+
+
+def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: dict[str, str],
+                     threads: int | None = None) -> dict[str, Any]:
+    """Render the keyframes ``indices`` of a planned render (stage 2) into ``<out_dir>/<task.rel_dir>``, each
+    written atomically under its final name, so a killed run keeps every keyframe it finished.
+
+    Returns
+    -------
+    dict
+        ``ok``, ``n_rendered``, ``n_reused``, ``seconds`` (wall), ``cpu_s`` (CPU time of this process, all
+        threads), ``pid``, ``host``; or ``ok=False`` and ``error``.
+    """
+    t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        return len(json.loads((render_dir / "timeline.json").read_text())["keyframes"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+        _apply_environment(env)
+        maybe_inject_fault(f"render:{task.sequence.name}:{indices[0]}")
+        select_variant()
+        _set_render_threads(threads)
+        seq = task.sequence
+        render_plan = RenderPlan.from_dict(plan)
+        done = render_keyframes(seq.scene, seq.trajectory, render_plan, indices, out_dir=Path(out_dir) / task.rel_dir,
+                                loaded=_cached_scene(seq, render_plan))
+        return {"ok": True, "n_rendered": len(done.frame_times_s), "n_reused": done.n_reused,
+                "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),
+                "host": socket.gethostname()}
+    except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
+        return _error_result(exc, t0)
 
 
 def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
@@ -111,6 +166,7 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         _apply_environment(env)
+        maybe_inject_fault(f"simulate:{task.rel_path}")
         out_path = Path(out_dir) / task.rel_path
         settings = RecordingSettings(lux=task.lux, sensors=dict(task.sensors), start_s=task.start_s,
                                      duration_s=task.duration_s, seed=task.seed, stream_key=tuple(task.stream_key),
@@ -144,48 +200,53 @@ def _die_with_parent() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the driver, which shuts the pool down
 
 
-#: Per-keyframe render work (megapixels × samples per pixel) below which a render is "small": its time goes
-#: mostly to serial work (scene building, kernel compilation), so several run side by side. Measured on the mini
-#: dataset (80×60, 8 spp = 0.04 MP·spp): two render processes on 2 cores took 23 s against 35 s for one.
-SMALL_RENDER_MP_SPP = 1.0
-
-
 class LocalExecutor:
-    """Process pools on this machine, sized so Mitsuba's own thread pool is not oversubscribed.
+    """Process pools on this machine: one for render chunks (Mitsuba stays loaded between chunks), one for
+    simulations, and together never more tasks at once than ``workers`` (default: the usable core count).
 
-    Large renders run one at a time in a dedicated process and own the machine (Mitsuba's thread pool uses
-    every core), simulations wait for them; small renders (``small_renders``, see :data:`SMALL_RENDER_MP_SPP`)
-    run in up to ``workers`` processes, each taking one slot. Simulations run in up to ``workers`` processes,
-    the slots the renders leave free.
+    Each render process gets ``cores // workers`` Dr.Jit threads (at least one), so chunks of keyframes side by
+    side use the cores without oversubscribing them; more processes than cores only with an explicit ``workers``.
+    A pool whose worker died (killed by the OS, a segfault) is replaced before the next task is submitted; the
+    tasks it was running come back with ``died=True`` so the driver can retry them.
     """
 
     name = "local"
 
-    def __init__(self, out_dir: Path, env: dict[str, str], workers: int | None = None, small_renders: bool = False):
+    def __init__(self, out_dir: Path, env: dict[str, str], workers: int | None = None):
         self.out_dir = str(out_dir)
         self.env = env
         self.workers = max(1, int(workers or default_workers()))
-        self.render_procs = self.workers if small_renders else 1
-        ctx = multiprocessing.get_context("spawn")  # no fork: no inherited locks, threads or Mitsuba state
-        self._render_pool = cf.ProcessPoolExecutor(self.render_procs, mp_context=ctx, initializer=_die_with_parent)
-        self._sim_pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_die_with_parent)
+        self.render_threads = max(1, default_workers() // self.workers)
+        self._ctx = multiprocessing.get_context("spawn")  # no fork: no inherited locks, threads or Mitsuba state
+        self._pools = {"render": self._new_pool(), "sim": self._new_pool()}
+
+    def _new_pool(self):
+        return cf.ProcessPoolExecutor(self.workers, mp_context=self._ctx, initializer=_die_with_parent)
+
+    def _pool(self, kind: str):
+        pool = self._pools[kind]
+        if getattr(pool, "_broken", False):  # a worker died: its pool refuses every later submit
+            pool.shutdown(wait=False, cancel_futures=True)
+            pool = self._pools[kind] = self._new_pool()
+        return pool
 
     def describe(self) -> str:
-        renders = "renders one at a time on all cores" if self.render_procs == 1 else \
-            f"small renders in up to {self.render_procs} processes"
-        return f"local: {renders}, {self.workers} simulation process(es)"
+        return (f"local: {self.workers} process(es) for chunks of keyframes ({self.render_threads} render "
+                f"thread(s) each) and simulations")
 
-    def submit_render(self, task):
-        return self._render_pool.submit(run_render, task, self.out_dir, self.env)
+    def slots(self) -> int:
+        """Tasks that may run at once (renders and simulations together)."""
+        return self.workers
+
+    def submit_render_plan(self, task):
+        return self._pool("render").submit(run_render_plan, task, self.out_dir, self.env)
+
+    def submit_render_chunk(self, task, plan: dict, indices: list[int]):
+        return self._pool("render").submit(run_render_chunk, task, plan, indices, self.out_dir, self.env,
+                                           self.render_threads)
 
     def submit_simulation(self, task):
-        return self._sim_pool.submit(run_simulation, task, self.out_dir, self.env)
-
-    def sim_slots(self, renders_running: int) -> int:
-        # A large render owns the machine; small renders each hold one process slot.
-        if self.render_procs == 1:
-            return 0 if renders_running else self.workers
-        return max(0, self.workers - min(renders_running, self.render_procs))
+        return self._pool("sim").submit(run_simulation, task, self.out_dir, self.env)
 
     @staticmethod
     def wait(futures):
@@ -196,11 +257,12 @@ class LocalExecutor:
     def result(future) -> dict[str, Any]:
         try:
             return future.result()
-        except cf.process.BrokenProcessPool as exc:
-            return {"ok": False, "error": f"worker process died ({exc})", "seconds": 0.0}
+        except cf.process.BrokenProcessPool:
+            return {"ok": False, "died": True, "seconds": 0.0,
+                    "error": "worker process died (killed by the OS, e.g. out of memory, or crashed)"}
 
     def close(self, cancel: bool = False) -> None:
-        for pool in (self._render_pool, self._sim_pool):
+        for pool in self._pools.values():
             if cancel:
                 # Interrupted: stop the running tasks now (their temporary files are removed by the next run)
                 # instead of waiting for them at interpreter exit. ``_processes`` is the pool's own table.
@@ -214,7 +276,7 @@ class DaskExecutor:
     """dask.distributed: join a running scheduler (``scheduler`` address) or start a LocalCluster.
 
     Every worker must see the output directory at the same path (a shared file system on a cluster) and have
-    SimSPAD installed. Dask schedules the tasks itself; ``sim_slots`` does not throttle.
+    SimSPAD installed. Dask schedules the tasks itself; ``slots`` does not throttle.
     """
 
     name = "dask"
@@ -239,8 +301,14 @@ class DaskExecutor:
             n = max(1, int(workers or default_workers()))
             for key, value in env.items():  # LocalCluster workers are spawned from this process: inherit env
                 os.environ.setdefault(key, value)
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                         dashboard_address=None, silence_logs=40)
+            # Workers start with SIGINT ignored (inherited through exec), so Ctrl-C reaches only the driver, which
+            # shuts the cluster down: one line instead of a traceback from every worker.
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            try:
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                             dashboard_address=None, silence_logs=40)
+            finally:
+                signal.signal(signal.SIGINT, previous)
             self.client = Client(self._cluster)
         self.workers = len(self.client.scheduler_info().get("workers", {}))
 
@@ -248,17 +316,22 @@ class DaskExecutor:
         where = "LocalCluster" if self._cluster is not None else self.client.scheduler.address
         return f"dask: {where}, {self.workers} worker(s)"
 
-    def submit_render(self, task):
-        return self.client.submit(run_render, task, self.out_dir, self.env, pure=False,
-                                  key=f"render-{task.sequence.name}-{task.render_hash[:12]}")
+    def submit_render_plan(self, task):
+        return self.client.submit(run_render_plan, task, self.out_dir, self.env, pure=False,
+                                  key=f"render-plan-{task.sequence.name}-{task.render_hash[:12]}")
+
+    def submit_render_chunk(self, task, plan: dict, indices: list[int]):
+        # threads=None: each Dask worker renders with its own thread count (one per single-threaded worker).
+        return self.client.submit(run_render_chunk, task, plan, indices, self.out_dir, self.env, None, pure=False,
+                                  key=f"render-{task.sequence.name}-{task.render_hash[:12]}-{indices[0]:06d}")
 
     def submit_simulation(self, task):
         return self.client.submit(run_simulation, task, self.out_dir, self.env, pure=False,
                                   key=f"simulate-{task.sequence_name}-{task.lux:g}lx-{task.recording_hash[:12]}")
 
     @staticmethod
-    def sim_slots(renders_running: int) -> int:
-        return 1 << 30
+    def slots() -> int:
+        return 1 << 30  # Dask schedules the tasks itself
 
     @staticmethod
     def wait(futures):
@@ -314,11 +387,10 @@ class ExecutorConfig:
             raise SimSpadError("--scheduler needs --executor dask", field="--scheduler")
 
 
-def make_executor(config: ExecutorConfig, out_dir: Path, *, render_mp_spp: float = 0.0):
-    """The executor ``config`` names; ``render_mp_spp`` is the largest per-keyframe render work (megapixels × spp)
-    of the job, which decides whether renders may run side by side."""
+def make_executor(config: ExecutorConfig, out_dir: Path):
+    """The executor ``config`` names."""
     config.check()
     env = job_environment()
     if config.kind == "local":
-        return LocalExecutor(out_dir, env, config.workers, small_renders=render_mp_spp <= SMALL_RENDER_MP_SPP)
+        return LocalExecutor(out_dir, env, config.workers)
     return DaskExecutor(out_dir, env, config.scheduler, config.workers)

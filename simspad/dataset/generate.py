@@ -1,8 +1,11 @@
 """Dataset generation (``simspad generate``): render each sequence once, simulate every sequence × lux.
 
-The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`): one render per sequence
-(shared by all lux levels and sensors) into ``<out>/renders/<sequence>-<hash>/``, then one simulation per
-(sequence, lux) into ``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. The driver (this module, in the
+The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`) through the driver's
+:class:`~simspad.dataset.task_queue.TaskQueue`: one render per sequence (shared by all lux levels and sensors) into
+``<out>/renders/<sequence>-<hash>/`` — a plan task, then chunks of keyframes spread over every worker, then
+``timeline.json`` written here once every chunk is back — then one simulation per (sequence, lux) into
+``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. Keyframes are written under their final names (each
+atomically), so a killed run's keyframes are kept and the next run renders only the missing ones. The driver (this module, in the
 calling process,
 with :mod:`~simspad.dataset.manifest_state`) is the only writer of ``manifest.json``, which it rewrites atomically as results arrive.
 
@@ -48,9 +51,12 @@ from simspad.dataset.manifest_state import (
 from simspad.dataset.plan import Plan, RecordingTask, RenderTask, make_plan
 from simspad.dataset.spec import DatasetSpec
 from simspad.dataset.spec_validation import load_spec
+from simspad.dataset.task_queue import Job, TaskQueue
 from simspad.errors import SimSpadError
 from simspad.io.atomic import ensure_writable_dir
 from simspad.io.manifest import recording_is_complete
+from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks
+from simspad.render.renderer import finalize_render
 
 
 @dataclass
@@ -182,53 +188,102 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
     if not todo:
         return outcome
 
-    render_mp_spp = max((r.sequence.resolution[0] * r.sequence.resolution[1] * r.sequence.spp / 1e6
-                         for r in renders), default=0.0)
-    ex = make_executor(executor, out_dir, render_mp_spp=render_mp_spp)
+    ex = make_executor(executor, out_dir)
     outcome.executor = ex.describe()
-    bar_r = tqdm(total=len(renders), desc="renders", unit="seq", disable=not progress or not renders, position=0,
+    bar_k = tqdm(total=0, desc="keyframes", unit="kf", disable=not progress or not renders, position=0,
                  leave=True, dynamic_ncols=True)
     bar_s = tqdm(total=len(todo), desc="recordings", unit="rec", disable=not progress, position=1, leave=True,
                  dynamic_ncols=True)
     render_times = {r.rel_dir: manifest.ren[r.rel_dir].get("timings", {}).get("render_s") for r in plan.renders}
     waiting = {}  # render rel_dir -> [RecordingTask] waiting for that render
-    ready = []    # simulations whose render exists, not yet submitted
+    queue = TaskQueue(ex, log)
     for task in todo:
         if any(r.rel_dir == task.render_rel_dir for r in renders):
             waiting.setdefault(task.render_rel_dir, []).append(task)
         else:
-            ready.append(task)
-    running: dict[Any, tuple[str, Any]] = {}
+            queue.add(_simulation_job(ex, task))
+    for r in renders:
+        queue.add(Job("plan", r, lambda r=r: ex.submit_render_plan(r), label=f"the render plan of {r.sequence.name}"))
+    chunked: dict[str, _ChunkedRender] = {}
     clean_exit = False
     try:
-        for r in renders:
-            running[ex.submit_render(r)] = ("render", r)
-        while running or ready:
-            renders_running = sum(1 for kind, _ in running.values() if kind == "render")
-            sims_running = len(running) - renders_running
-            while ready and sims_running < ex.sim_slots(renders_running):
-                task = ready.pop(0)
-                running[ex.submit_simulation(task)] = ("sim", task)
-                sims_running += 1
-            for fut in ex.wait(list(running)):
-                kind, task = running.pop(fut)
-                res = ex.result(fut)
-                if kind == "render":
-                    _render_done(manifest, task, res, waiting, ready, outcome, render_times, bar_s, log)
-                    bar_r.update(1)
-                else:
-                    _simulation_done(manifest, task, res, render_times, outcome, log)
+        while queue.busy:
+            for job, res in queue.finished():
+                if job.kind == "sim":
+                    _simulation_done(manifest, job.payload, res, render_times, outcome, log)
                     bar_s.update(1)
-                manifest.save()
+                    manifest.save()
+                    continue
+                if job.kind == "plan":
+                    r = job.payload
+                    if not res.get("ok"):
+                        _render_done(manifest, r, res, waiting, queue, ex, outcome, render_times, bar_s, log)
+                        manifest.save()
+                        continue
+                    state = chunked[r.rel_dir] = _ChunkedRender(res["plan"], seconds=res.get("seconds", 0.0),
+                                                                host=res.get("host"))
+                    existing = set(res.get("existing", ()))
+                    todo_kf = [i for i in range(res["n_keyframes"]) if i not in existing]
+                    if existing:
+                        log(f"render of {r.sequence.name}: {len(existing)} of {res['n_keyframes']} keyframes "
+                            "already there (kept from an interrupted run)")
+                    bar_k.total += len(todo_kf)
+                    bar_k.refresh()
+                    chunks = keyframe_chunks(todo_kf, chunk_size_for(len(todo_kf), ex.workers))
+                    state.left = len(chunks)
+                    for c in chunks:
+                        queue.add(Job("chunk", (r, c), lambda r=r, c=c, p=res["plan"]: ex.submit_render_chunk(r, p, c),
+                                      label=f"keyframes {c[0]}–{c[-1]} of {r.sequence.name}"))
+                else:
+                    r, c = job.payload
+                    state = chunked[r.rel_dir]
+                    state.left -= 1
+                    state.seconds += res.get("seconds", 0.0)
+                    if res.get("ok"):
+                        bar_k.update(len(c))
+                    elif state.error is None:
+                        state.error = res.get("error")
+                if state.left == 0:
+                    final = _finish_render(out_dir, r, state)
+                    _render_done(manifest, r, final, waiting, queue, ex, outcome, render_times, bar_s, log)
+                    manifest.save()
         clean_exit = True
     finally:
-        bar_r.close()
+        bar_k.close()
         bar_s.close()
         ex.close(cancel=not clean_exit)
     return outcome
 
 
-def _render_done(manifest, task: RenderTask, res, waiting, ready, outcome, render_times, bar_s, log) -> None:
+@dataclass
+class _ChunkedRender:
+    """A planned render whose chunks of keyframes are running."""
+
+    plan: dict
+    seconds: float = 0.0  # summed over the plan and every chunk (worker time)
+    host: Any = None
+    left: int = 0  # chunks not finished yet
+    error: str | None = None  # first chunk error
+
+
+def _finish_render(out_dir: Path, task: RenderTask, state: _ChunkedRender) -> dict:
+    """Once every chunk is back: ``timeline.json`` (in the driver; it needs no Mitsuba), or the first error."""
+    res = {"ok": False, "seconds": state.seconds, "host": state.host, "error": state.error}
+    if state.error is None:
+        try:
+            render_plan = RenderPlan.from_dict(state.plan)
+            finalize_render(render_plan, out_dir / task.rel_dir)
+            res.update(ok=True, n_keyframes=render_plan.n_keyframes)
+        except SimSpadError as exc:
+            res["error"] = exc.format().replace("\n", "; ")
+    return res
+
+
+def _simulation_job(ex, task: RecordingTask) -> Job:
+    return Job("sim", task, lambda: ex.submit_simulation(task), label=task.rel_path)
+
+
+def _render_done(manifest, task: RenderTask, res, waiting, queue, ex, outcome, render_times, bar_s, log) -> None:
     entry = manifest.ren[task.rel_dir]
     entry["timings"] = {"render_s": round(res.get("seconds", 0.0), 3), "host": res.get("host")}
     dependants = waiting.pop(task.rel_dir, [])
@@ -236,7 +291,8 @@ def _render_done(manifest, task: RenderTask, res, waiting, ready, outcome, rende
         entry.update(status="complete", n_keyframes=res.get("n_keyframes"))
         render_times[task.rel_dir] = entry["timings"]["render_s"]
         outcome.renders_done.append(task.rel_dir)
-        ready.extend(dependants)
+        for rec in dependants:
+            queue.add(_simulation_job(ex, rec))
         return
     entry.update(status="failed", error=res.get("error"))
     log(f"render of {task.sequence.name} failed: {res.get('error')}")

@@ -9,18 +9,25 @@ screen space: radiance (the scene's integrator, ``spp`` samples) and depth (an `
 of everything that determines its pixels, so re-runs re-use frames and an interrupted render resumes
 (:mod:`simspad.render.keyframe_files`); ``timeline.json`` is written last.
 
-With ``interpolation = "warp"`` (the default) only sparse keyframes are rendered; those between are synthesized
-by reprojection and rendered for real only where the warps disagree (:mod:`simspad.render.warp_render`);
-``timeline.json`` marks each keyframe's ``source``.
+A render is three stages (:mod:`simspad.render.render_plan`): :func:`plan_render` (keyframe instants, poses and
+names), :func:`render_keyframes` (any list of keyframe indices, in any process: ``simspad generate`` spreads
+chunks of them over its workers) and :func:`finalize_render` (``timeline.json``, once every keyframe exists).
+:func:`render_sequence` runs the three in one process.
+
+With ``interpolation = "warp"`` (opt-in, :mod:`simspad.render.settings` says why it is not the default) only
+sparse keyframes are rendered in one process; those between are synthesized by reprojection and rendered for real
+only where the warps disagree (:mod:`simspad.render.warp_render`); ``timeline.json`` marks each keyframe's
+``source``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import sys
 import time
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -29,9 +36,21 @@ from simspad.errors import SimSpadError
 from simspad.io.render_dir import write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
-from simspad.render.flow import camera_poses, max_step_flow, near_depth, object_poses, predicted_flow_fn
-from simspad.render.keyframe_files import frame_is_intact
-from simspad.render.keyframe_files import frame_names, make_out_dir, remove_created, remove_stale_frames, write_frame
+from simspad.render.flow import (
+    camera_poses,
+    max_step_flow,
+    near_depth,
+    object_poses,
+    predicted_flow_fn,
+)
+from simspad.render.keyframe_files import (
+    frame_is_intact,
+    frame_names,
+    make_out_dir,
+    remove_created,
+    remove_stale_frames,
+    write_frame,
+)
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.mitsuba_scene import (
     DEPTH_SPP,
@@ -41,6 +60,7 @@ from simspad.render.mitsuba_scene import (
     MitsubaScene,
     sampler_for,
 )
+from simspad.render.render_plan import RenderPlan
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
@@ -48,7 +68,8 @@ from simspad.render.warp_render import render_with_warps
 from simspad.render.warp_schedule import describe_disagreement
 from simspad.scenes.library import content_hash, resolve_scene
 
-__all__ = ["RenderSettings", "RenderSummary", "render_sequence", "select_variant"]
+__all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
+           "load_scene", "plan_render", "render_keyframes", "render_sequence", "select_variant"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
 RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
@@ -87,11 +108,170 @@ def _check_span(ts, source: str, start_s: float, end_s: float) -> None:
 
 
 
+# ---------------------------------------------------------------------------------------------------- stages
+class LoadedScene(NamedTuple):
+    """A scene and trajectory loaded in this process (one Mitsuba load, re-used by the stages run here)."""
+
+    info: Any  # simspad.scenes.library.SceneInfo
+    ts: TrajectorySet
+    traj_source: str
+    traj_hash: str
+    ms: MitsubaScene
+    variant: str
+    counter: CompileCounter
+
+
+def load_scene(scene, trajectory, width: int, height: int, spp: int, variant: str | None = None) -> LoadedScene:
+    """Resolve ``scene``, load ``trajectory`` and the Mitsuba scene at ``width`` × ``height`` px, ``spp``."""
+    info = resolve_scene(scene)
+    ts, traj_source, traj_hash = _load_trajectory(trajectory, info)
+    variant = select_variant(variant)
+    counter = CompileCounter(variant)
+    ms = MitsubaScene(info, ts, width, height, spp)
+    return LoadedScene(info, ts, traj_source, traj_hash, ms, variant, counter)
+
+
+def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | None = None,
+                spad_bin_s: float | None = None, loaded: LoadedScene | None = None) -> RenderPlan:
+    """Stage 1: the keyframe instants, poses and file names of a render, and its ``timeline.json`` fields.
+
+    Loads the scene (unless ``loaded`` is given), checks the trajectory covers the span, and runs the adaptive
+    schedule. Writes nothing. Arguments as :func:`render_sequence`.
+    """
+    width, height = settings.checked_size()
+    spp, seed = int(settings.spp), int(settings.seed)
+    max_flow_px, min_rate_hz = float(settings.max_flow_px), float(settings.min_rate_hz)
+    duration_s = settings.duration_s
+    t0, t1 = float(settings.start_s), float(settings.start_s) + float(duration_s)
+    if loaded is None:
+        loaded = load_scene(scene, trajectory, width, height, spp, variant)
+    info, ts, ms = loaded.info, loaded.ts, loaded.ms
+    _check_span(ts, loaded.traj_source, t0, t1)
+    near_depth_m = near_depth(ts, ms, t0, t1, seed)
+    flow_fn = predicted_flow_fn(ts, ms, near_depth_m)
+    times = keyframe_schedule(t0, t1, flow_fn, max_flow_px, min_rate_hz)
+    step_flow = max_step_flow(flow_fn, times)
+    cam_poses = camera_poses(ts, ms.rest_camera_to_world, times)
+    mitsuba_version = ms.mi.__version__
+    base_key = {"renderer": RENDERER_VERSION, "mitsuba": mitsuba_version, "variant": loaded.variant,
+                "scene": content_hash(info), "trajectory": loaded.traj_hash, "width": width, "height": height,
+                "spp": spp, "seed": seed, "depth_spp": DEPTH_SPP, "sampler": sampler_for(spp),
+                "psf_sigma_px": PSF_SIGMA_PX}
+    names = frame_names(base_key, times)
+    n_spad_bins = None if spad_bin_s is None else brute_force_keyframes(duration_s, spad_bin_s)
+    schedule = {"n_keyframes": len(times)}
+    if n_spad_bins is not None:
+        schedule["n_spad_bins"] = n_spad_bins
+    schedule["max_predicted_flow_px"] = step_flow
+    schedule["interpolation"] = "linear"
+    schedule["n_rendered_keyframes"] = len(times)
+    # What reprojection (keyframe synthesis, measured image motion) needs to move animated objects.
+    objects_to_world = tuple({k: m.tolist() for k, m in sorted(object_poses(ts, float(t)).items())}
+                             for t in times) if ms.object_names else ()
+    timeline = dict(
+        scene=info.name, scene_hash=base_key["scene"], trajectory=loaded.traj_source,
+        trajectory_hash=loaded.traj_hash, start_s=t0, duration_s=float(duration_s),
+        renderer={"name": "mitsuba", "mitsuba_version": mitsuba_version, "variant": loaded.variant, "spp": spp,
+                  "seed": seed, "sampler": sampler_for(spp), "rfilter": RECONSTRUCTION_FILTER,
+                  "psf_sigma_px": PSF_SIGMA_PX, "depth_spp": DEPTH_SPP,
+                  "depth": "Z: distance along the optical axis, m (inf: no hit)",
+                  "max_flow_px": max_flow_px, "min_rate_hz": min_rate_hz, "near_depth_m": near_depth_m,
+                  "focal_px": ms.focal_px, "x_fov_deg": ms.x_fov_deg, "camera_id": info.camera_id,
+                  "animated_objects": ms.object_names, "simspad_renderer_version": RENDERER_VERSION},
+        schedule=schedule,
+    )
+    return RenderPlan(times_s=tuple(float(t) for t in times), names=tuple(names),
+                      camera_to_world=tuple(tuple(tuple(row) for row in p.tolist()) for p in cam_poses),
+                      width=width, height=height, spp=spp, seed=seed, variant=loaded.variant,
+                      scene_hash=base_key["scene"], trajectory_hash=loaded.traj_hash, timeline=timeline,
+                      objects_to_world=objects_to_world, base_key=base_key)
+
+
+def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, progress: bool = False,
+                     loaded: LoadedScene | None = None, on_frame: Callable[[int], None] | None = None
+                     ) -> "RenderedFrames":
+    """Stage 2: render the keyframes ``indices`` of ``plan`` whose files are not in ``out_dir`` yet.
+
+    Any subset, in any order, in any process: every keyframe uses the plan's fixed seed, so its bytes do not
+    depend on what else this call renders. A later stage may call this with an explicit list (e.g. only the
+    keyframes a synthesis step could not produce).
+
+    Parameters
+    ----------
+    scene, trajectory
+        As given to :func:`plan_render` (reloaded here unless ``loaded`` is given; their content hashes must
+        match the plan's).
+    plan : RenderPlan
+    indices : iterable of int
+        Keyframe indices into ``plan``.
+    out_dir : str or Path
+        Render directory (created if missing).
+    progress : bool
+        Show a keyframe progress bar on stderr.
+    on_frame : callable, optional
+        Called with each keyframe index once its file exists (rendered or re-used).
+
+    Raises
+    ------
+    SimSpadError
+        An index out of range, or a scene, trajectory or Mitsuba variant other than the plan's.
+    """
+    out_dir = Path(out_dir)
+    indices = [int(i) for i in indices]
+    bad = [i for i in indices if not 0 <= i < plan.n_keyframes]
+    if bad:
+        raise SimSpadError(f"keyframe index {bad[0]} outside the plan's 0..{plan.n_keyframes - 1}", field="indices")
+    make_out_dir(out_dir)
+    todo = [i for i in indices if not ((out_dir / plan.names[i]).is_file() and frame_is_intact(out_dir / plan.names[i]))]
+    if todo and loaded is None:
+        loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
+    if loaded is not None:
+        _check_same_inputs(plan, loaded)
+    counter = loaded.counter if loaded is not None else None
+    if counter is not None:
+        counter.take()  # kernels of loading and depth probes belong to no frame
+    frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), out_dir / plan.names[i]) for i in indices]
+    return _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
+
+
+def finalize_render(plan: RenderPlan, out_dir) -> Path:
+    """Stage 3: write ``timeline.json`` (which marks the render directory complete) once every keyframe file of
+    ``plan`` exists, and delete frames of earlier renders into the same directory that it does not reference.
+
+    Raises
+    ------
+    SimSpadError
+        Keyframe files missing (their count and the first one).
+    """
+    out_dir = Path(out_dir)
+    missing = [name for name in plan.names if not (out_dir / name).is_file()]
+    if missing:
+        raise SimSpadError(f"{len(missing)} of {plan.n_keyframes} keyframes not rendered yet (first: {missing[0]})",
+                           path=out_dir)
+    path = write_timeline_json(out_dir, width=plan.width, height=plan.height, keyframes=plan.keyframes(),
+                               **plan.timeline)
+    remove_stale_frames(out_dir, set(plan.names))
+    return path
+
+
+def _check_same_inputs(plan: RenderPlan, loaded: LoadedScene) -> None:
+    if loaded.variant != plan.variant:
+        raise SimSpadError(f"this worker renders with Mitsuba variant {loaded.variant} but the plan was made with "
+                           f"{plan.variant}: give every worker the same DRJIT_LIBLLVM_PATH", field="variant")
+    if content_hash(loaded.info) != plan.scene_hash:
+        raise SimSpadError("the scene changed since the render was planned", path=loaded.info.source or
+                           loaded.info.folder, field="scene")
+    if loaded.traj_hash != plan.trajectory_hash:
+        raise SimSpadError("the trajectory changed since the render was planned", path=loaded.traj_source,
+                           field="trajectory")
+
+
 # ---------------------------------------------------------------------------------------------------- render
 def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                     progress: bool = True, variant: str | None = None,
                     spad_bin_s: float | None = None) -> RenderSummary:
-    """Render radiance keyframes of ``scene`` along ``trajectory`` into a render directory (DESIGN §5).
+    """Render radiance keyframes of ``scene`` along ``trajectory`` into a render directory: the three stages
+    (:func:`plan_render`, :func:`render_keyframes` of every keyframe, :func:`finalize_render`) in this process.
 
     Parameters
     ----------
@@ -123,121 +303,88 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
         raised before anything is written.
     """
     width, height = settings.checked_size()
-    duration_s, start_s, spp, seed = settings.duration_s, settings.start_s, settings.spp, settings.seed
-    max_flow_px, min_rate_hz = settings.max_flow_px, settings.min_rate_hz
-    spp, seed, max_flow_px, min_rate_hz = int(spp), int(seed), float(max_flow_px), float(min_rate_hz)
     out_dir = Path(out_dir)
     created = make_out_dir(out_dir)
-    t0, t1 = float(start_s), float(start_s) + float(duration_s)
     try:
-        info = resolve_scene(scene)
-        ts, traj_source, traj_hash = _load_trajectory(trajectory, info)
-        _check_span(ts, traj_source, t0, t1)
-        variant = select_variant(variant)
-        counter = CompileCounter(variant)
-        ms = MitsubaScene(info, ts, width, height, spp)
-        near_depth_m = near_depth(ts, ms, t0, t1, seed)
-        flow_fn = predicted_flow_fn(ts, ms, near_depth_m)
-        times = keyframe_schedule(t0, t1, flow_fn, max_flow_px, min_rate_hz)
+        loaded = load_scene(scene, trajectory, width, height, int(settings.spp), variant)
+        plan = plan_render(scene, trajectory, settings, spad_bin_s=spad_bin_s, loaded=loaded)
     except BaseException:
         remove_created(created)
         raise
-    step_flow = max_step_flow(flow_fn, times)
-    cam_poses = camera_poses(ts, ms.rest_camera_to_world, times)
-    mitsuba_version = ms.mi.__version__
-
-    base_key = {"renderer": RENDERER_VERSION, "mitsuba": mitsuba_version, "variant": variant,
-                "scene": content_hash(info), "trajectory": traj_hash, "width": width, "height": height, "spp": spp,
-                "seed": seed, "depth_spp": DEPTH_SPP, "sampler": sampler_for(spp),
-                "psf_sigma_px": PSF_SIGMA_PX}
-    names = frame_names(base_key, times)
-
-    counter.take()  # kernels of loading and depth probes belong to no frame
     # Warp needs object ids to move animated objects, and pays two noise-probe renders: below two strides of
     # keyframes it saves nothing, so such short sequences render every keyframe.
-    warp = (settings.interpolation == "warp" and not ms.moves_objects_without_ids
-            and len(times) >= 2 * settings.warp_stride)
-    if warp:  # render sparse keyframes, synthesize the rest (render/warp_render.py)
-        bar = _progress(len(times), progress)
-        try:
-            done = render_with_warps(ms, ts, times, cam_poses, base_key, out_dir, seed, counter, bar,
-                                     stride=settings.warp_stride, threshold=settings.warp_threshold)
-        finally:
-            bar.close()
-        names, sources = done.names, done.plan.sources
-    else:
-        done = _render_frames(ms, ts, [(t, cam_poses[i], out_dir / name)
-                                       for i, (t, name) in enumerate(zip(times, names))], seed, counter, progress)
-        sources = ["render"] * len(times)
-
-    keyframes = [{"t": float(t), "file": name, "camera_to_world": cam_poses[i].tolist(), "source": sources[i]}
-                 for i, (t, name) in enumerate(zip(times, names))]
-    for kf in keyframes if ms.object_names else []:  # what reprojection needs to move animated objects
-        kf["object_to_world"] = {k: m.tolist() for k, m in sorted(object_poses(ts, kf["t"]).items())}
-    n_spad_bins = None if spad_bin_s is None else brute_force_keyframes(duration_s, spad_bin_s)
-    schedule = {"n_keyframes": len(times)}
-    if n_spad_bins is not None:
-        schedule["n_spad_bins"] = n_spad_bins
-    schedule["max_predicted_flow_px"] = step_flow
-    schedule["interpolation"] = "warp" if warp else "linear"
-    schedule["n_rendered_keyframes"] = sources.count("render")
+    warp = (settings.interpolation == "warp" and not loaded.ms.moves_objects_without_ids
+            and plan.n_keyframes >= 2 * settings.warp_stride)
     if warp:
-        schedule["warp"] = {"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
-                            **describe_disagreement(done.plan.disagreement)}
-    write_timeline_json(
-        out_dir, width=width, height=height, keyframes=keyframes,
-        scene=info.name, scene_hash=base_key["scene"], trajectory=traj_source, trajectory_hash=traj_hash,
-        start_s=t0, duration_s=float(duration_s),
-        renderer={"name": "mitsuba", "mitsuba_version": mitsuba_version, "variant": variant, "spp": spp,
-                  "seed": seed, "sampler": sampler_for(spp), "rfilter": RECONSTRUCTION_FILTER,
-                  "psf_sigma_px": PSF_SIGMA_PX, "depth_spp": DEPTH_SPP,
-                  "depth": "Z: distance along the optical axis, m (inf: no hit)",
-                  "max_flow_px": max_flow_px, "min_rate_hz": min_rate_hz, "near_depth_m": near_depth_m,
-                  "focal_px": ms.focal_px, "x_fov_deg": ms.x_fov_deg, "camera_id": info.camera_id,
-                  "animated_objects": ms.object_names,
-                  "simspad_renderer_version": RENDERER_VERSION},
-        schedule=schedule,
-    )
-    remove_stale_frames(out_dir, set(names))
-    return RenderSummary(out_dir=out_dir, n_keyframes=len(times), n_rendered=len(done.frame_times_s),
-                         n_reused=done.n_reused, duration_s=float(duration_s), start_s=t0, n_spad_bins=n_spad_bins,
-                         render_s=done.render_s, variant=variant,
+        done, plan = _render_warped(plan, loaded, settings, out_dir, progress)
+    else:
+        done = render_keyframes(scene, trajectory, plan, range(plan.n_keyframes), out_dir=out_dir,
+                                progress=progress, loaded=loaded)
+    finalize_render(plan, out_dir)
+    schedule = plan.timeline["schedule"]
+    return RenderSummary(out_dir=out_dir, n_keyframes=plan.n_keyframes, n_rendered=len(done.frame_times_s),
+                         n_reused=done.n_reused, duration_s=float(settings.duration_s), start_s=plan.timeline["start_s"],
+                         n_spad_bins=schedule.get("n_spad_bins"), render_s=done.render_s, variant=plan.variant,
                          compiled_first_frame=done.compiled[0] if done.compiled else -1,
-                         compiled_after_first=sum(done.compiled[1:]) if counter.enabled else -1,
-                         max_predicted_flow_px=step_flow, spad_bin_s=spad_bin_s, frame_times_s=done.frame_times_s,
-                         n_warped=sources.count("warp"))
+                         compiled_after_first=sum(done.compiled[1:]) if loaded.counter.enabled else -1,
+                         max_predicted_flow_px=schedule["max_predicted_flow_px"], spad_bin_s=spad_bin_s,
+                         frame_times_s=done.frame_times_s, n_warped=list(plan.sources).count("warp"))
 
 
-class _RenderedFrames(NamedTuple):
+def _render_warped(plan: RenderPlan, loaded: LoadedScene, settings: RenderSettings, out_dir: Path, progress: bool):
+    """Render sparse keyframes of ``plan`` and synthesize the rest (:mod:`simspad.render.warp_render`); the
+    plan comes back with the keyframes' files and sources and the warp schedule in its timeline fields."""
+    times = np.asarray(plan.times_s)
+    cam_poses = np.asarray(plan.camera_to_world)
+    loaded.counter.take()  # kernels of loading and depth probes belong to no frame
+    bar = _progress(plan.n_keyframes, progress)
+    try:
+        done = render_with_warps(loaded.ms, loaded.ts, times, cam_poses, plan.base_key, out_dir, plan.seed,
+                                 loaded.counter, bar, stride=settings.warp_stride, threshold=settings.warp_threshold)
+    finally:
+        bar.close()
+    sources = tuple(done.plan.sources)
+    schedule = dict(plan.timeline["schedule"], interpolation="warp", n_rendered_keyframes=sources.count("render"),
+                    warp={"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
+                          **describe_disagreement(done.plan.disagreement)})
+    plan = dataclasses.replace(plan, names=tuple(done.names), sources=sources,
+                               timeline=dict(plan.timeline, schedule=schedule))
+    return done, plan
+
+
+class RenderedFrames(NamedTuple):
+    """What :func:`render_keyframes` did."""
+
     frame_times_s: list  # wall time of each rendered frame, s
     compiled: list  # kernels new to the process while rendering each frame
     n_reused: int  # frames already in the cache
     render_s: float  # wall time of the whole loop, s
 
 
-def _render_frames(ms: MitsubaScene, ts: TrajectorySet, frames: list, seed: int, counter: CompileCounter,
-                   progress: bool) -> _RenderedFrames:
-    """Render and write every ``(t, camera_to_world, path)`` of ``frames`` whose file is not there yet."""
+def _render_frames(loaded: LoadedScene | None, frames: list, seed: int, counter: CompileCounter | None,
+                   progress: bool, on_frame=None) -> RenderedFrames:
+    """Render and write every ``(index, t, camera_to_world, path)`` of ``frames`` whose file is not there yet."""
     frame_times, compiled, n_reused = [], [], 0
     bar = _progress(len(frames), progress)
     t_render = time.perf_counter()
     try:
-        for t, camera_to_world, path in frames:
+        for i, t, camera_to_world, path in frames:
             if path.is_file() and frame_is_intact(path):  # a damaged cached frame is rendered again
                 n_reused += 1
-                bar.update(1)
-                continue
-            tic = time.perf_counter()
-            ms.set_pose(camera_to_world, object_poses(ts, t))
-            rgb = ms.render_radiance(seed)
-            depth, object_id = ms.render_depth_ids(seed)
-            write_frame(path, rgb, depth, object_id)
-            frame_times.append(time.perf_counter() - tic)
-            compiled.append(counter.take())
+            else:
+                tic = time.perf_counter()
+                loaded.ms.set_pose(camera_to_world, object_poses(loaded.ts, t))
+                rgb = loaded.ms.render_radiance(seed)
+                depth, object_id = loaded.ms.render_depth_ids(seed)
+                write_frame(path, rgb, depth, object_id)
+                frame_times.append(time.perf_counter() - tic)
+                compiled.append(counter.take())
             bar.update(1)
+            if on_frame is not None:
+                on_frame(i)
     finally:
         bar.close()
-    return _RenderedFrames(frame_times, compiled, n_reused, time.perf_counter() - t_render)
+    return RenderedFrames(frame_times, compiled, n_reused, time.perf_counter() - t_render)
 
 
 class _NoBar:

@@ -271,3 +271,85 @@ def test_corrupted_recording_is_redone_and_foreign_manifest_refused(tiny):
     (foreign / "manifest.json").write_text('{"format": "something-else"}')
     with pytest.raises(InputError, match="format"):
         generate(load_spec(spec_path), foreign, progress=False)
+
+
+def test_one_worker_resumes_partial_render_identically(tiny):
+    """Chunks of keyframes: one worker gives the bytes two gave, and a restart keeps the keyframes a killed run
+    finished (render a is left half done without its timeline.json, render b is gone)."""
+    root, _, out, _ = tiny
+    target = root / "partial"
+    shutil.copytree(out / "renders", target / "renders")
+    render_a, render_b = sorted((target / "renders").iterdir())
+    (render_a / "timeline.json").unlink()
+    frames_a = sorted((render_a / "frames").iterdir())
+    for p in frames_a[1::2]:
+        p.unlink()
+    kept = {p.name: _stat(render_a / "frames", p.name) for p in frames_a[0::2]}
+    shutil.rmtree(render_b)
+    leftover = render_a / "frames" / ".000001-0123456789abcdef.exr.tmp-99999-0badcafe"  # a killed chunk's
+    leftover.write_bytes(b"partial")
+    spec_path = _write_spec(root / "partial.toml", lux=(1,))
+    res = generate(load_spec(spec_path), target, ExecutorConfig("local", workers=1), progress=False,
+                   created_utc=CREATED)
+    assert sorted(res.done) == ["recordings/a/a_1lx.h5", "recordings/b/b_1lx.h5"] and len(res.renders_done) == 2
+    assert {name: _stat(render_a / "frames", name) for name in kept} == kept  # re-used, not re-rendered
+    assert not leftover.exists()
+    assert _renders_digest(target) == _renders_digest(out)
+    assert (render_a / "timeline.json").read_bytes() == (out / "renders" / render_a.name / "timeline.json").read_bytes()
+    for rel in res.done:
+        assert file_sha256(target / rel) == file_sha256(out / rel), rel
+
+
+def test_dead_worker_is_retried_once_then_failed(tiny, monkeypatch):
+    """A worker SIGKILLed under a task (as by the OOM killer) breaks the local pool: the pool is replaced, the task
+    retried once alone; a task that dies twice is marked failed and the rest of the run finishes."""
+    root, spec_path, out, _ = tiny
+    work = root / "dead"
+    shutil.copytree(out, work)
+    for rel in ("recordings/a/a_1lx.h5", "recordings/b/b_1lx.h5"):
+        (work / rel).unlink()
+    render_b = next(p for p in (work / "renders").iterdir() if p.name.startswith("b-"))
+    shutil.rmtree(render_b)
+    monkeypatch.setenv("SIMSPAD_KILL_WORKER", ",".join([
+        "simulate:recordings/a/a_1lx.h5",  # dies every time
+        f"simulate:recordings/b/b_1lx.h5@{root / 'dead-sim-once'}",
+        f"render:b:0@{root / 'dead-render-once'}"]))
+    res = generate(load_spec(spec_path), work, ExecutorConfig("local", workers=2), progress=False, check=False)
+    assert (root / "dead-sim-once").exists() and (root / "dead-render-once").exists()  # both hooks fired
+    assert res.failed == ["recordings/a/a_1lx.h5"]
+    assert res.done == ["recordings/b/b_1lx.h5"] and [Path(r).name[:2] for r in res.renders_done] == ["b-"]
+    entries = {e["path"]: e for e in read_manifest(work)["recordings"]}
+    assert entries["recordings/a/a_1lx.h5"]["status"] == "failed"
+    assert "worker process died" in entries["recordings/a/a_1lx.h5"]["error"]
+    for rel in res.done:
+        assert entries[rel]["status"] == "complete" and file_sha256(work / rel) == file_sha256(out / rel)
+    with pytest.raises(SimSpadError, match="1 of 4 recordings failed"):
+        from simspad.dataset.generate import raise_for_failures
+
+        raise_for_failures(res)
+
+
+def test_estimate_matches_the_generated_dataset(tiny, monkeypatch):
+    """`generate --estimate` from measured unit costs: exact keyframe counts, disk within a factor 1.5 of what the
+    run wrote, wall time falling with workers; a run that cannot fit the free disk is refused unless --yes."""
+    from simspad.cli import generate as cli_generate
+    from simspad.dataset.estimate import estimate_spec, measure_unit_costs
+
+    root, spec_path, out, _ = tiny
+    spec = load_spec(spec_path)
+    costs = measure_unit_costs(spec)
+    assert costs.render["siemens-star"].b_s > 0 and costs.sim_s_per["spad"] > 0 and costs.events_per_mp_s > 0
+    est = estimate_spec(spec, costs)
+    m = read_manifest(out)
+    assert est.n_keyframes == sum(r["n_keyframes"] for r in m["renders"])
+    written = sum(e["size"] for e in m["recordings"])
+    assert written / 1.5 < est.recordings_bytes < written * 1.5
+    exr = sum(p.stat().st_size for p in (out / "renders").rglob("*.exr"))
+    assert exr / 1.5 < est.renders_bytes < exr * 1.5
+    assert est.wall_s(64) < est.wall_s(2) < est.wall_s(1)
+    assert est.peak_memory_bytes(2) > 0
+
+    monkeypatch.setattr(cli_generate, "free_disk_bytes", lambda path: 1000)
+    with pytest.raises(SimSpadError, match="--yes"):
+        cli_generate.generate_from_cli(spec_path, out_dir=root / "nospace")
+    assert not (root / "nospace").exists()

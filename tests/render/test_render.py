@@ -140,6 +140,32 @@ def test_simspad_render_compares_with_the_spad_preset_bin(tmp_path, capsys):
     assert schedule["n_spad_bins"] == n_bins
 
 
+# ------------------------------------------------------------------------------------------ stages
+def test_stages_in_chunks_give_the_bytes_of_one_render(tmp_path):
+    """plan → keyframes in two interleaved chunks, each in its own scene load (as two workers) → finalize: every
+    file byte-identical to render_sequence's; finalizing with a keyframe missing is refused."""
+    from simspad.render.render_plan import RenderPlan
+    from simspad.render.renderer import finalize_render, plan_render, render_keyframes
+
+    folder = _textured_folder(tmp_path / "tex")
+    settings = RenderSettings(duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=100.0)
+    render_sequence(folder, _pan(), settings, out_dir=tmp_path / "whole", progress=False)
+    plan = RenderPlan.from_dict(plan_render(folder, _pan(), settings).to_dict())  # as it travels to workers
+    assert plan.n_keyframes >= 4
+    out = tmp_path / "chunks"
+    render_keyframes(folder, _pan(), plan, range(1, plan.n_keyframes, 2), out_dir=out)
+    with pytest.raises(SimSpadError, match="not rendered yet"):
+        finalize_render(plan, out)
+    done = render_keyframes(folder, _pan(), plan, range(plan.n_keyframes - 1, -1, -1), out_dir=out)
+    assert (len(done.frame_times_s), done.n_reused) == (plan.n_keyframes - plan.n_keyframes // 2,
+                                                        plan.n_keyframes // 2)
+    finalize_render(plan, out)
+    files = sorted(p.relative_to(tmp_path / "whole") for p in (tmp_path / "whole").rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file())
+    for rel in files:
+        assert (out / rel).read_bytes() == (tmp_path / "whole" / rel).read_bytes(), rel
+
+
 # ------------------------------------------------------------------------------------------ cache, resume
 def test_cache_reuse_resume_and_invalidation(tmp_path):
     folder = _textured_folder(tmp_path / "tex")

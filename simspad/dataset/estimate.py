@@ -1,0 +1,451 @@
+"""What a dataset spec will cost, before anything runs: renders, CPU-hours, wall time, disk, peak memory.
+
+Nothing here is a constant of this package: every figure is a measured unit cost on this machine scaled by the
+spec's sizes.
+
+- **Keyframes** are exact: each sequence's render is planned at its full size (:func:`plan_render`: the adaptive
+  schedule from the predicted image motion), which writes nothing.
+- **Render time** per keyframe: a calibration render of a few keyframes of each scene along its own trajectory,
+  on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
+  traversal, depth pass, EXR write; variable part: path tracing).
+- **Simulation time**: one throughput probe of the spec's sensors on a small render (ground truth, SPAD, frames,
+  events), measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by
+  Gbit of SPAD data, megapixel-frames and megapixel-seconds; plus a per-recording fixed part (the all-sensor
+  probe minus its units at the marginal costs).
+- **Disk**: the probe files' bytes per unit (the same marginal fit, so compression counts) and per recording;
+  renders from the calibration EXRs' bytes per pixel.
+- **Peak memory** per worker: the kernel's peak-RSS counter (``VmHWM``, reset through ``/proc/self/clear_refs``)
+  around the calibration renders (growth between the two sample counts, scaled by pixels·spp) and the probe
+  (scaled by pixels: a simulation streams in time), on top of the calibrating process's own peak.
+
+:func:`measure_unit_costs` takes ~1 min on 2 cores for three scenes; :func:`estimate_spec` turns the costs into
+the figures of one spec.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from simspad.dataset.directory import recording_rel_path
+from simspad.dataset.executors import (
+    default_workers,
+    job_environment,
+    render_settings_of,
+)
+from simspad.dataset.plan import make_plan
+from simspad.io.recording import open_recording
+from simspad.physics.radiometry import Optics
+from simspad.render.mitsuba_env import select_variant
+from simspad.render.render_plan import chunk_size_for
+from simspad.render.renderer import (
+    load_scene,
+    plan_render,
+    render_keyframes,
+    render_sequence,
+)
+from simspad.render.settings import RenderSettings
+from simspad.scenes.library import resolve_scene
+from simspad.sensors.simulate import RecordingSettings, simulate_recording
+from simspad.sensors.spad import n_bins
+
+#: Calibration render: width (px), keyframes timed per sample count (after one untimed keyframe that compiles
+#: the kernels), the two sample counts whose difference separates the per-sample cost from the fixed one, and the
+#: span (s) of the trajectory the keyframes are taken from.
+CALIBRATION_WIDTH_PX = 64
+CALIBRATION_KEYFRAMES = 2
+CALIBRATION_SPP = (4, 64)  # powers of four: the low-discrepancy sampler takes them as they are
+CALIBRATION_SPAN_S = 0.02
+#: Throughput probe: size (px) and the two simulated durations (s) whose difference gives marginal costs.
+PROBE_SIZE_PX = (64, 48)
+PROBE_DURATIONS_S = (0.008, 0.024)
+MIB = 1024**2
+
+
+def _vm_hwm_bytes() -> int | None:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def _vm_rss_bytes() -> int | None:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def _reset_peak_rss() -> bool:
+    """Reset the kernel's peak-RSS counter of this process (Linux ≥ 4.0); False where that is not possible."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+class _PeakRss:
+    """Peak RSS above the current RSS while the ``with`` block runs (bytes; None where unmeasurable)."""
+
+    def __enter__(self):
+        self.ok = _reset_peak_rss()
+        self.base = _vm_rss_bytes()
+        self.bytes = None
+        return self
+
+    def __exit__(self, *exc):
+        peak = _vm_hwm_bytes()
+        if self.ok and peak is not None and self.base is not None:
+            self.bytes = max(peak - self.base, 0)
+
+
+@dataclass
+class SceneRenderCost:
+    """Measured render cost of one scene, one thread: ``a_s + b_s·(MP·spp)`` per keyframe."""
+
+    a_s: float
+    b_s: float
+    exr_bytes_per_px: float
+    rss_bytes_per_mp_spp: float | None  # peak-RSS growth with the sample wavefront
+    process_rss_bytes: int | None  # peak RSS of the calibrating process (imports, scene, renders)
+    load_s: float = 0.0  # CPU seconds to load the scene (once per chunk of keyframes)
+
+    def seconds_per_keyframe(self, megapixels: float, spp: int) -> float:
+        return self.a_s + self.b_s * megapixels * spp
+
+
+@dataclass
+class UnitCosts:
+    """Measured unit costs on this machine (one core each)."""
+
+    render: dict = field(default_factory=dict)  # scene name -> SceneRenderCost
+    gt_s_per_mp_frame: float = 0.0
+    #: seconds and bytes per unit of each sensor: spad per Gbit, frames per MP·frame, events per MP·s
+    sim_s_per: dict = field(default_factory=dict)
+    bytes_per: dict = field(default_factory=dict)  # also "gt": bytes per MP·frame
+    events_per_mp_s: float = 0.0
+    recording_fixed_s: float = 0.0  # per recording, beyond the per-unit costs
+    recording_fixed_bytes: float = 0.0
+    sim_rss_bytes_per_mp: float | None = None  # peak-RSS growth of a simulation with its pixel count
+    sim_process_rss_bytes: int | None = None  # peak RSS of the probing process (imports, numba, buffers)
+    calibration_s: float = 0.0
+
+
+def _settings(seq, resolution, duration_s, spp):
+
+    return RenderSettings(duration_s=duration_s, start_s=seq.start_s, resolution=tuple(resolution), spp=spp,
+                          max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=1)
+
+
+def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
+    """Time :data:`CALIBRATION_KEYFRAMES` keyframes of ``seq``'s scene along its trajectory at two sample counts
+    (one scene load), one thread."""
+    import drjit as dr  # deferred: heavy; the variant is already set
+
+
+    dr.set_thread_count(1)  # per-core cost: workers render with one thread each
+    w = CALIBRATION_WIDTH_PX
+    h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
+    span_s = min(seq.duration_s, CALIBRATION_SPAN_S)
+    cpu0 = time.process_time()
+    loaded = load_scene(seq.scene, seq.trajectory, w, h, CALIBRATION_SPP[0])
+    load_s = time.process_time() - cpu0  # every chunk of keyframes loads the scene once
+    points, exr, rss = [], [], []
+    for spp in CALIBRATION_SPP:
+        loaded.ms.spp = spp  # mi.render takes the sample count per call; same scene, same film
+        plan = plan_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp), loaded=loaded)
+        picks = sorted({int(round(i)) for i in np.linspace(0, plan.n_keyframes - 1, CALIBRATION_KEYFRAMES + 1)})
+        out = tmp / f"cal-{spp}"
+        render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
+        timed = picks[1:] or picks[:1]
+        with _PeakRss() as peak:
+            cpu0 = time.process_time()  # CPU time, not wall: a busy machine must not inflate the unit cost
+            render_keyframes(seq.scene, seq.trajectory, plan, timed, out_dir=out / "t", loaded=loaded)
+            points.append((w * h / 1e6 * spp, (time.process_time() - cpu0) / len(timed)))
+        exr.append(np.mean([(out / "t" / plan.names[i]).stat().st_size for i in timed]) / (w * h))
+        rss.append(peak.bytes)
+    dr.set_thread_count(default_workers())
+    (x1, y1), (x2, y2) = points
+    b = max((y2 - y1) / (x2 - x1), 0.0)
+    a = max(y1 - b * x1, 0.0)
+    slope = None if None in rss else max(rss[1] - rss[0], 0) / (x2 - x1)
+    return SceneRenderCost(a_s=a, b_s=b, exr_bytes_per_px=float(np.mean(exr)), rss_bytes_per_mp_spp=slope,
+                           process_rss_bytes=_vm_hwm_bytes(), load_s=load_s)
+
+
+def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
+    """Marginal simulation costs of the spec's sensors on a small render of ``seq``."""
+
+    w, h = PROBE_SIZE_PX
+    mp = w * h / 1e6
+    half, full = PROBE_DURATIONS_S
+    rdir = tmp / "probe-render"
+    render_sequence(seq.scene, seq.trajectory, _settings(seq, (w, h), full, 4), out_dir=rdir, progress=False)
+    params = {k: s.params for k, s in spec.sensors.items()}
+    lux = float(np.median(spec.lux))
+    gt_rate_hz = spec.evaluation.rate_hz
+
+    def run(kinds, duration_s):
+        out = tmp / f"probe-{'-'.join(kinds) or 'gt'}-{duration_s}.h5"
+        settings = RecordingSettings(lux=lux, sensors={k: params[k] for k in kinds}, start_s=seq.start_s,
+                                     duration_s=duration_s, seed=1, stream_key=("estimate", lux),
+                                     gt_rate_hz=gt_rate_hz, optics=Optics())
+        cpu0 = time.process_time()  # CPU time: simulations are single-threaded, and the machine may be busy
+        simulate_recording(rdir, out, settings, metadata={"created_utc": "2025-01-01T00:00:00Z"}, progress=False)
+        return time.process_time() - cpu0, out
+
+    run(list(params), half)  # imports and JIT compilation, untimed
+    with _PeakRss() as peak:
+        t_all, p_all = run(list(params), full)
+    if peak.bytes is not None:
+        costs.sim_rss_bytes_per_mp = peak.bytes / mp
+    costs.sim_process_rss_bytes = _vm_hwm_bytes()
+    gt = [run([], d) for d in (half, full)]
+    gt_marginal = max(gt[1][0] - gt[0][0], 0.0)
+    gt_bytes = gt[1][1].stat().st_size - gt[0][1].stat().st_size
+    gt_units = mp * (full - half) * gt_rate_hz
+    costs.gt_s_per_mp_frame = max(gt_marginal, 1e-9) / gt_units
+    costs.bytes_per["gt"] = max(gt_bytes, 0) / gt_units
+    for kind in params:
+        (t1, p1), (t2, p2) = run([kind], half), run([kind], full)
+        dt = max(t2 - t1 - gt_marginal, 1e-9)
+        db = max(p2.stat().st_size - p1.stat().st_size - gt_bytes, 0)
+        with open_recording(p1) as r1, open_recording(p2) as r2:
+            if kind == "spad":
+                units = (r2.spad.n_bins - r1.spad.n_bins) * w * h / 1e9  # Gbit
+            elif kind == "frames":
+                units = (r2.frames.n_frames - r1.frames.n_frames) * mp  # MP·frame
+                if units <= 0:  # no frame boundary between the two durations: the whole run's average instead
+                    units, dt, db = r2.frames.n_frames * mp, max(t2 - gt[1][0], 1e-9), max(
+                        p2.stat().st_size - gt[1][1].stat().st_size, 0)
+            elif kind == "events":
+                units = mp * (full - half)  # MP·s
+                costs.events_per_mp_s = r2.events.n_events / (mp * full)
+            else:
+                continue
+        if units <= 0:  # nothing of this sensor in the probe (e.g. no frame in its span): no figure to scale
+            continue
+        costs.sim_s_per[kind] = dt / units
+        costs.bytes_per[kind] = db / units
+    # What a recording costs beyond its per-unit parts (file creation, attributes, poses, reading the render):
+    # the all-sensor probe minus its units at the marginal costs.
+    with open_recording(p_all) as r:
+        units_full = {"spad": r.spad.n_bins * w * h / 1e9 if "spad" in params else 0.0,
+                      "frames": r.frames.n_frames * mp if "frames" in params else 0.0,
+                      "events": mp * full if "events" in params else 0.0}
+    gt_full = mp * full * gt_rate_hz
+    costs.recording_fixed_s = max(t_all - costs.gt_s_per_mp_frame * gt_full - sum(
+        costs.sim_s_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
+    costs.recording_fixed_bytes = max(p_all.stat().st_size - costs.bytes_per["gt"] * gt_full - sum(
+        costs.bytes_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
+
+
+def measure_unit_costs(spec, log=lambda msg: None) -> UnitCosts:
+    """Calibrate render costs for every scene of ``spec`` and probe its sensors' simulation costs (≈ 1 min)."""
+
+    for key, value in job_environment().items():
+        os.environ.setdefault(key, value)
+    select_variant()
+    t0 = time.perf_counter()
+    costs = UnitCosts()
+    tmp = Path(tempfile.mkdtemp(prefix="simspad-estimate-"))
+    try:
+        for seq in spec.sequences:
+            name = resolve_scene(seq.scene).name
+            if name not in costs.render:
+                log(f"calibrating renders of {name}")
+                costs.render[name] = _calibrate_scene(seq, tmp)
+        log("probing simulation throughput")
+        _probe_simulation(spec, spec.sequences[0], tmp, costs)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    costs.calibration_s = time.perf_counter() - t0
+    return costs
+
+
+@dataclass
+class Estimate:
+    """What a spec will cost on this machine (from :class:`UnitCosts`)."""
+
+    n_renders: int
+    n_keyframes: int
+    n_recordings: int
+    render_cpu_s: float
+    sim_cpu_s: float
+    longest_sim_s: float
+    largest_render_cpu_s: float
+    keyframe_s: list  # (seconds per keyframe on one core, keyframes) of each render
+    scene_load_s: list  # (seconds to load the scene, keyframes) of each render: paid once per chunk
+    disk_bytes: int
+    recordings_bytes: int
+    renders_bytes: int
+    peak_render_rss_bytes: float | None
+    peak_sim_rss_bytes: float | None
+    cores: int
+    plan_s: float
+
+    @property
+    def cpu_s(self) -> float:
+        return self.render_cpu_s + self.sim_cpu_s
+
+    def wall_s(self, workers: int) -> float:
+        """Wall time on ``workers`` single-core workers: renders in chunks of keyframes over all of them (at
+        worst one chunk's time after the last), then the simulations (at best the longest one)."""
+
+        chunk_tail = max((s * chunk_size_for(n, workers) for s, n in self.keyframe_s), default=0.0)
+        loads = sum(load * math.ceil(n / chunk_size_for(n, workers)) for load, n in self.scene_load_s)
+        render = (self.render_cpu_s + loads) / workers + chunk_tail if self.render_cpu_s else 0.0
+        sims = max(self.sim_cpu_s / workers, self.longest_sim_s)
+        return render + sims
+
+    def peak_memory_bytes(self, workers: int) -> float | None:
+        """Peak resident memory of ``workers`` processes at once (each the larger of a render and a simulation)."""
+        per = [b for b in (self.peak_render_rss_bytes, self.peak_sim_rss_bytes) if b is not None]
+        return workers * max(per) if per else None
+
+
+def estimate_spec(spec, costs: UnitCosts) -> Estimate:
+    """Exact keyframe counts (each render planned at full size) and sizes, with ``costs`` for time and memory."""
+
+    t0 = time.perf_counter()
+    plan = make_plan(spec, "1970-01-01T00:00:00Z")
+    keyframe_s, scene_load_s, render_cpu, renders_bytes, largest, render_rss = [], [], 0.0, 0, 0.0, None
+    size_of = {}
+    for r in plan.renders:
+        seq = r.sequence
+        rp = plan_render(seq.scene, seq.trajectory, render_settings_of(r))
+        cost = costs.render[resolve_scene(seq.scene).name]
+        w, h = seq.resolution
+        per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
+        keyframe_s.append((per_kf, rp.n_keyframes))
+        scene_load_s.append((cost.load_s, rp.n_keyframes))
+        render_cpu += per_kf * rp.n_keyframes
+        largest = max(largest, per_kf * rp.n_keyframes)
+        renders_bytes += int(cost.exr_bytes_per_px * w * h * rp.n_keyframes)
+        if cost.rss_bytes_per_mp_spp is not None and cost.process_rss_bytes is not None:
+            render_rss = max(render_rss or 0.0,
+                             cost.process_rss_bytes + cost.rss_bytes_per_mp_spp * w * h / 1e6 * seq.spp)
+        size_of[r.rel_dir] = (w, h)
+    plan_s = time.perf_counter() - t0
+    spad, frames = spec.sensors.get("spad"), spec.sensors.get("frames")
+    sim_cpu, longest, rec_bytes, sim_rss = 0.0, 0.0, 0.0, None
+    for rec in plan.recordings:
+        w, h = size_of[rec.render_rel_dir]
+        mp = w * h / 1e6
+        gt_units = mp * rec.duration_s * rec.gt_rate_hz
+        t = costs.recording_fixed_s + costs.gt_s_per_mp_frame * gt_units
+        b = costs.recording_fixed_bytes + costs.bytes_per.get("gt", 0.0) * gt_units
+        units = {}
+        if spad is not None:
+            gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
+            units["spad"] = n_bins(rec.duration_s, spad.params.bin_s, gate) * w * h / 1e9
+        if frames is not None:
+            units["frames"] = int(rec.duration_s * frames.params.frame_rate_hz) * mp
+        if "events" in spec.sensors:
+            units["events"] = mp * rec.duration_s
+        for kind, u in units.items():
+            t += costs.sim_s_per.get(kind, 0.0) * u
+            b += costs.bytes_per.get(kind, 0.0) * u
+        sim_cpu += t
+        longest = max(longest, t)
+        rec_bytes += b
+        if costs.sim_rss_bytes_per_mp is not None and costs.sim_process_rss_bytes is not None:
+            sim_rss = max(sim_rss or 0.0, costs.sim_process_rss_bytes + costs.sim_rss_bytes_per_mp * mp)
+    return Estimate(n_renders=len(plan.renders), n_keyframes=sum(n for _, n in keyframe_s),
+                    n_recordings=len(plan.recordings), render_cpu_s=render_cpu, sim_cpu_s=sim_cpu,
+                    longest_sim_s=longest, largest_render_cpu_s=largest, keyframe_s=keyframe_s,
+                    scene_load_s=scene_load_s,
+                    disk_bytes=int(rec_bytes) + renders_bytes, recordings_bytes=int(rec_bytes),
+                    renders_bytes=renders_bytes, peak_render_rss_bytes=render_rss, peak_sim_rss_bytes=sim_rss,
+                    cores=default_workers(), plan_s=plan_s)
+
+
+def free_disk_bytes(path) -> int:
+    """Free bytes on the file system that will hold ``path`` (its nearest existing ancestor)."""
+    p = Path(path).expanduser().resolve()
+    while not p.exists():
+        p = p.parent
+    return shutil.disk_usage(p).free
+
+
+def total_memory_bytes() -> int | None:
+    """Physical memory of this machine (bytes), None where unknown."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_workers=(16, 64, 256),
+                    free_bytes: int | None = None) -> str:
+    """The estimate as printed by ``simspad generate --estimate`` (and ``benchmarks/bench_generate.py``)."""
+    def hours(s):
+        return f"{s / 3600:.2f} h" if s >= 3600 else f"{s / 60:.1f} min" if s >= 60 else f"{s:.0f} s"
+
+    def size(b):
+        return f"{b / 1024**3:.2f} GiB" if b >= 1024**3 else f"{b / MIB:.1f} MiB"
+
+    lines = [f"estimate (unit costs measured here in {costs.calibration_s:.0f} s, keyframes planned in "
+             f"{est.plan_s:.0f} s):",
+             f"  renders      {est.n_renders} sequence(s), {est.n_keyframes} keyframes, "
+             f"{est.render_cpu_s / 3600:.2f} CPU-h",
+             f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
+             f"{hours(est.longest_sim_s)})",
+             f"  total        {est.cpu_s / 3600:.2f} CPU-h",
+             f"  wall time    {hours(est.wall_s(workers))} here ({workers} worker(s))"]
+    for n in cluster_workers:
+        lines.append(f"               {hours(est.wall_s(n))} on {n} workers (one core each, this machine's speed)")
+    disk = f"  disk         {size(est.disk_bytes)} (recordings {size(est.recordings_bytes)}, renders " \
+           f"{size(est.renders_bytes)})"
+    if free_bytes is not None:
+        disk += f"; {size(free_bytes)} free"
+    lines.append(disk)
+    peak = est.peak_memory_bytes(workers)
+    if peak is not None:
+        per = max(b for b in (est.peak_render_rss_bytes, est.peak_sim_rss_bytes) if b is not None)
+        total = total_memory_bytes()
+        lines.append(f"  peak memory  {size(peak)} ({workers} worker(s) × {size(per)})"
+                     + (f"; this machine has {size(total)}" if total else ""))
+    lines.append("  unit costs   render s/keyframe (one core): " + ", ".join(
+        f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp (scene load {c.load_s:.1f} s per chunk)"
+        for name, c in costs.render.items()))
+    sim = [f"{k} {v:.3g} s/" + {"spad": "Gbit", "frames": "MP·frame", "events": "MP·s"}[k]
+           for k, v in costs.sim_s_per.items()]
+    lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]))
+    return "\n".join(lines)
+
+
+def disk_needed_bytes(spec, out_dir) -> int:
+    """Bytes the recordings of ``spec`` not yet in ``out_dir`` will take, from sizes alone (no measurement): SPAD
+    bit-planes (one bit per pixel and bin), frames (2 bytes per pixel) and ground truth (4 bytes per pixel and
+    frame), uncompressed. Events and renders are left out (they need :func:`measure_unit_costs`), so this is the
+    quick check ``generate`` makes before every run."""
+
+    spad, frames = spec.sensors.get("spad"), spec.sensors.get("frames")
+    total = 0
+    for seq in spec.sequences:
+        w, h = seq.resolution
+        per = int(spec.evaluation.rate_hz * seq.duration_s) * w * h * 4
+        if spad is not None:
+            gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
+            per += n_bins(seq.duration_s, spad.params.bin_s, gate) * h * math.ceil(w / 8)
+        if frames is not None:
+            per += int(seq.duration_s * frames.params.frame_rate_hz) * w * h * 2
+        for lux in spec.lux:
+            if not (Path(out_dir) / recording_rel_path(seq.name, lux)).is_file():
+                total += per
+    return total
