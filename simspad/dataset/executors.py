@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from simspad.dataset.speed import sequence_trajectories
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
@@ -85,7 +86,8 @@ def run_render(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
                 settings = RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s,
                                           resolution=tuple(seq.resolution), spp=seq.spp, max_flow_px=seq.max_flow_px,
                                           min_rate_hz=seq.min_rate_hz, seed=task.seed)
-                render_sequence(seq.scene, seq.trajectory, settings, out_dir=tmp, progress=False,
+                trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
+                render_sequence(seq.scene, trajectory, settings, out_dir=tmp, progress=False,
                                 spad_bin_s=SpadParams().bin_s)
         return {"ok": True, "seconds": time.perf_counter() - t0, "n_keyframes": _count_keyframes(final),
                 "host": socket.gethostname()}

@@ -53,7 +53,8 @@ class ManifestState:
                      "recordings": [], "renders": []}
         self.rec = {}
         for task in plan.recordings:
-            entry = {"sequence": task.sequence_name, "scene": task.scene, "lux": task.lux, "path": task.rel_path,
+            entry = {"sequence": task.sequence_name, "scene": task.scene, "speed_factor": task.speed_factor,
+                     "lux": task.lux, "path": task.rel_path,
                      "size": None, "sha256": None, "status": "pending", "recording_hash": task.recording_hash,
                      "render": task.render_rel_dir, "timings": {}}
             prev = old.get(task.rel_path)
@@ -65,7 +66,8 @@ class ManifestState:
         self.ren = {}
         for task in plan.renders:
             prev = old_renders.get(task.rel_dir) or {}
-            entry = {"sequence": task.sequence.name, "scene": scene_name(task.sequence.scene), "path": task.rel_dir,
+            entry = {"sequence": task.sequence.name, "scene": scene_name(task.sequence.scene),
+                     "speed_factor": task.speed_factor, "path": task.rel_dir,
                      "render_hash": task.render_hash, "status": prev.get("status", "pending"),
                      "n_keyframes": prev.get("n_keyframes"), "timings": prev.get("timings", {})}
             self.ren[task.rel_dir] = entry
