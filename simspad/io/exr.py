@@ -19,6 +19,9 @@ from simspad.io.atomic import atomic_path
 RGB_CHANNELS = ("R", "G", "B")
 LUMINANCE_CHANNEL = "Y"
 DEPTH_CHANNELS = ("Z", "depth.Z", "depth.Y", "depth.T", "depth")
+#: Optional per-pixel object id (0: static scene or no hit; k: k-th animated object), see
+#: :mod:`simspad.render.reprojection`. Readers that do not need it ignore it.
+OBJECT_ID_CHANNEL = "object_id"
 
 
 @dataclass(frozen=True)
@@ -101,7 +104,8 @@ def read_exr(path: str | Path) -> dict[str, np.ndarray]:
     -------
     dict
         ``"rgb"``: [H, W, 3] linear radiance (present if the file has R,G,B), ``"y"``: [H, W] (present if it
-        has only Y), ``"z"``: [H, W] depth in scene units (m) if the file has a depth channel.
+        has only Y), ``"z"``: [H, W] depth in scene units (m) if the file has a depth channel, ``"object_id"``:
+        [H, W] per-pixel object id if the file has :data:`OBJECT_ID_CHANNEL`.
     """
     path = Path(path)
     try:
@@ -117,4 +121,6 @@ def read_exr(path: str | Path) -> dict[str, np.ndarray]:
         out["y"] = channels[LUMINANCE_CHANNEL].astype(np.float32, copy=False)
     if depth is not None:
         out["z"] = channels[depth].astype(np.float32, copy=False)
+    if OBJECT_ID_CHANNEL in channels:
+        out["object_id"] = channels[OBJECT_ID_CHANNEL].astype(np.float32, copy=False)
     return out

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.errors import SimSpadError
-from simspad.io.exr import write_exr
+from simspad.io.exr import OBJECT_ID_CHANNEL, write_exr
 
 
 def make_out_dir(out_dir: Path) -> list[Path]:
@@ -62,9 +62,13 @@ def frame_names(base: dict, times: np.ndarray) -> list[str]:
     return [f"frames/{i:06d}-{frame_key(base, t)}.exr" for i, t in enumerate(times)]
 
 
-def write_frame(path: Path, rgb: np.ndarray, depth: np.ndarray) -> None:
-    """Write linear radiance ``rgb`` [H, W, 3] and depth ``depth`` [H, W] (m) as channels R, G, B, Z."""
-    write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": depth})
+def write_frame(path: Path, rgb: np.ndarray, depth: np.ndarray, object_id: np.ndarray | None = None) -> None:
+    """Write linear radiance ``rgb`` [H, W, 3] and depth ``depth`` [H, W] (m) as channels R, G, B, Z, plus the
+    per-pixel object id (:data:`simspad.io.exr.OBJECT_ID_CHANNEL`) when given."""
+    channels = {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": depth}
+    if object_id is not None:
+        channels[OBJECT_ID_CHANNEL] = object_id
+    write_exr(path, channels)
 
 
 def remove_stale_frames(out_dir: Path, keep: set[str]) -> None:

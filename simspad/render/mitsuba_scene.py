@@ -92,6 +92,7 @@ class MitsubaScene:
         self.x_fov_deg = float(np.asarray(cam_params["x_fov"]).ravel()[0])
         self.rest_camera_to_world = _matrix(cam_params["to_world"])
         near = float(np.asarray(cam_params["near_clip"]).ravel()[0])
+        self.near_clip_m = near
         far = float(np.asarray(cam_params["far_clip"]).ravel()[0])
         self.sensor = mi.load_dict({
             "type": "perspective", "fov": self.x_fov_deg, "fov_axis": "x", "near_clip": near, "far_clip": far,
@@ -110,6 +111,7 @@ class MitsubaScene:
         })
         self.depth_sensor_params = mi.traverse(self.depth_sensor)
         self.depth_integrator = mi.load_dict({"type": "aov", "aovs": "dd.y:depth"})
+        self.depth_id_integrator = mi.load_dict({"type": "aov", "aovs": "dd.y:depth,sh:shape_index"})
         self.params = mi.traverse(self.scene)
         shapes = {s.id(): s for s in self.scene.shapes()}
         self.objects = {}
@@ -118,12 +120,30 @@ class MitsubaScene:
                 raise SimSpadError(f"the trajectory moves object {name!r} but the scene has no shape with that id "
                                    f"(shapes: {', '.join(sorted(shapes))})", path=ts.source, field=name)
             self.objects[name] = self._rest_pose(name)
+        self.object_names = sorted(self.objects)
+        self._object_id_of_shape = self._object_id_lookup(shapes)
         self.focal_px = focal_length_px(self.x_fov_deg, width)
         self.width, self.height, self.spp = width, height, spp
         x = (np.arange(width) + 0.5 - 0.5 * width) / self.focal_px
         y = (np.arange(height) + 0.5 - 0.5 * height) / self.focal_px
-        # Mitsuba's depth AOV is the distance along the ray; Z is the depth along the optical axis.
+        # Mitsuba's depth AOV is the distance along the ray from the near-clip plane (the perspective sensor starts
+        # its rays there); Z is the depth along the optical axis from the camera centre: ray·cos θ + near_clip.
         self._ray_to_z = (1.0 / np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)).astype(np.float32)
+
+    def _object_id_lookup(self, shapes: dict) -> np.ndarray | None:
+        """Table from Mitsuba's ``shape_index`` AOV (the shape's registry index in the JIT variants) to our object
+        id (:data:`simspad.render.reprojection.OBJECT_ID_CHANNEL`: k for the k-th sorted animated object, 0 for
+        the rest). None when there is no animated object, or the variant has no registry index (scalar)."""
+        if not self.objects or not self.mi.variant().startswith(("llvm", "cuda")):
+            return None
+        import drjit as dr  # deferred: heavy; only the JIT variants index shapes in a registry
+
+        index = {sid: int(np.asarray(dr.reinterpret_array(self.mi.UInt32, self.mi.ShapePtr(s))).ravel()[0])
+                 for sid, s in shapes.items()}
+        table = np.zeros(max(index.values()) + 1, dtype=np.float32)
+        for k, name in enumerate(self.object_names, start=1):
+            table[index[name]] = k
+        return table
 
     def _rest_pose(self, name: str) -> dict:
         key_v, key_n, key_w = f"{name}.vertex_positions", f"{name}.vertex_normals", f"{name}.to_world"
@@ -173,7 +193,28 @@ class MitsubaScene:
         img = self.mi.render(self.scene, self.params, sensor=self.depth_sensor, integrator=self.depth_integrator,
                              seed=seed, spp=DEPTH_SPP)
         ray = np.array(img, dtype=np.float32)[..., 0]
-        return np.where(ray > 0, ray * self._ray_to_z, np.float32(np.inf)).astype(np.float32)
+        return self._z_from_ray(ray)
+
+    def _z_from_ray(self, ray: np.ndarray) -> np.ndarray:
+        """Depth Z (m) along the optical axis from the camera centre, ``inf`` where the ray hit nothing."""
+        return np.where(ray > 0, ray * self._ray_to_z + np.float32(self.near_clip_m),
+                        np.float32(np.inf)).astype(np.float32)
+
+
+    def render_depth_ids(self, seed: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Depth Z (m, as :meth:`render_depth`, same samples) and the per-pixel object id (float32; None when the
+        scene has no animated object or the variant cannot name shapes), from one AOV pass."""
+        if self._object_id_of_shape is None:
+            return self.render_depth(seed), None
+        img = np.array(self.mi.render(self.scene, self.params, sensor=self.depth_sensor,
+                                      integrator=self.depth_id_integrator, seed=seed, spp=DEPTH_SPP),
+                       dtype=np.float32)
+        ray, shape = img[..., 0], np.rint(img[..., 1]).astype(np.int64)
+        hit = ray > 0
+        table = self._object_id_of_shape
+        known = hit & (shape >= 0) & (shape < table.size)
+        ids = np.where(known, table[np.clip(shape, 0, table.size - 1)], 0)
+        return self._z_from_ray(ray), ids.astype(np.float32)
 
 
 def _matrix(transform) -> np.ndarray:

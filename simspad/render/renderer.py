@@ -44,7 +44,7 @@ from simspad.scenes.library import content_hash, resolve_scene
 __all__ = ["RenderSettings", "RenderSummary", "render_sequence", "select_variant"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
-RENDERER_VERSION = 5
+RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
 #: Slack (s) allowed between the requested span and the trajectory's span.
 SPAN_TOLERANCE_S = 1e-9
 
@@ -151,6 +151,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
 
     keyframes = [{"t": float(t), "file": name, "camera_to_world": cam_poses[i].tolist()}
                  for i, (t, name) in enumerate(zip(times, names))]
+    for kf in keyframes if ms.object_names else []:  # what reprojection needs to move animated objects
+        kf["object_to_world"] = {k: m.tolist() for k, m in sorted(object_poses(ts, kf["t"]).items())}
     n_spad_bins = None if spad_bin_s is None else brute_force_keyframes(duration_s, spad_bin_s)
     schedule = {"n_keyframes": len(times)}
     if n_spad_bins is not None:
@@ -166,6 +168,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                   "depth": "Z: distance along the optical axis, m (inf: no hit)",
                   "max_flow_px": max_flow_px, "min_rate_hz": min_rate_hz, "near_depth_m": near_depth_m,
                   "focal_px": ms.focal_px, "x_fov_deg": ms.x_fov_deg, "camera_id": info.camera_id,
+                  "animated_objects": ms.object_names,
                   "simspad_renderer_version": RENDERER_VERSION},
         schedule=schedule,
     )
@@ -200,8 +203,8 @@ def _render_frames(ms: MitsubaScene, ts: TrajectorySet, frames: list, seed: int,
             tic = time.perf_counter()
             ms.set_pose(camera_to_world, object_poses(ts, t))
             rgb = ms.render_radiance(seed)
-            depth = ms.render_depth(seed)
-            write_frame(path, rgb, depth)
+            depth, object_id = ms.render_depth_ids(seed)
+            write_frame(path, rgb, depth, object_id)
             frame_times.append(time.perf_counter() - tic)
             compiled.append(counter.take())
             bar.update(1)
