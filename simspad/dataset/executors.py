@@ -27,10 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from simspad import defaults
 from simspad.dataset.speed import sequence_trajectories
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
+from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.renderer import render_sequence
 from simspad.render.settings import RenderSettings
@@ -117,13 +119,27 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         settings = RecordingSettings(lux=task.lux, sensors=dict(task.sensors), start_s=task.start_s,
                                      duration_s=task.duration_s, seed=task.seed, stream_key=tuple(task.stream_key),
                                      gt_rate_hz=task.gt_rate_hz, optics=task.optics)
-        simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, settings, metadata=dict(task.metadata),
-                           progress=False)
+        render_dir = Path(out_dir) / task.render_rel_dir
+        measured = {}
+        simulate_recording(render_dir, out_path, settings, metadata=dict(task.metadata), progress=False,
+                           motion_attrs=_motion_measurement(render_dir, task, measured))
         seconds = time.perf_counter() - t0
         return {"ok": True, "seconds": seconds, "size": out_path.stat().st_size, "sha256": file_sha256(out_path),
-                "host": socket.gethostname()}
+                "host": socket.gethostname(), "motion": measured}
     except BaseException as exc:  # noqa: BLE001
         return _error_result(exc, t0)
+
+
+def _motion_measurement(render_dir: Path, task, measured: dict):
+    """``attrs(frame_exposure_s)``: the recording's motion attributes, measured on its render over its span (the
+    blur over the frame camera's exposure, or over :data:`simspad.defaults.FRAME_BLUR_EXPOSURE_S` without one),
+    also left in ``measured`` for the manifest."""
+    def attrs(frame_exposure_s):
+        exposure_s = defaults.FRAME_BLUR_EXPOSURE_S if frame_exposure_s is None else float(frame_exposure_s)
+        motion = measure_image_motion(render_dir, task.start_s, task.start_s + task.duration_s, exposure_s)
+        measured.update(motion_attrs(motion, task.speed_factor))
+        return measured
+    return attrs
 
 
 def default_workers() -> int:

@@ -240,6 +240,8 @@ def _simulation_done(manifest, task: RecordingTask, res, render_times, outcome, 
     entry["timings"] = timings
     if res.get("ok"):
         entry.update(status="complete", size=res["size"], sha256=res["sha256"])
+        if res.get("motion"):
+            entry["motion"] = res["motion"]
         entry.pop("error", None)
         outcome.done.append(task.rel_path)
     else:

@@ -61,6 +61,8 @@ class ManifestState:
             if prev and prev.get("recording_hash") == task.recording_hash and prev.get("status") == "complete":
                 for key in ("size", "sha256", "status", "timings"):
                     entry[key] = prev.get(key)
+                if "motion" in prev:  # the measured image motion (simspad.render.image_motion) of a kept file
+                    entry["motion"] = prev["motion"]
             self.rec[task.rel_path] = entry
             self.data["recordings"].append(entry)
         self.ren = {}
