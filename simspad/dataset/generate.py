@@ -1,10 +1,12 @@
-"""Dataset generation (``simspad generate``): render each sequence once, simulate every sequence × lux.
+"""Dataset generation (``simspad generate``): render each sequence once per speed, simulate every
+sequence × speed × lux.
 
-The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`): one render per sequence
-(shared by all lux levels and sensors) into ``<out>/renders/<sequence>-<hash>/``, then one simulation per
-(sequence, lux) into ``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. The driver (this module, in the
-calling process,
-with :mod:`~simspad.dataset.manifest_state`) is the only writer of ``manifest.json``, which it rewrites atomically as results arrive.
+The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`): one render per
+(sequence, speed) (shared by all lux levels and sensors) into ``<out>/renders/<sequence>[_x<k>]-<hash>/``, then one
+simulation per (sequence, speed, lux) into ``<out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5``, which
+also states the image motion measured on its render (:mod:`simspad.render.image_motion`). The driver (this
+module, in the calling process, with :mod:`~simspad.dataset.manifest_state`) is the only writer of
+``manifest.json``, which it rewrites atomically as results arrive.
 
 Determinism: every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key
 ``(sequence, lux)``), every render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same
@@ -225,7 +227,7 @@ def _render_done(manifest, task: RenderTask, res, waiting, ready, outcome, rende
         ready.extend(dependants)
         return
     entry.update(status="failed", error=res.get("error"))
-    log(f"render of {task.sequence.name} failed: {res.get('error')}")
+    log(f"render of {task.sequence.name} ×{task.speed_factor:g} failed: {res.get('error')}")
     for rec in dependants:
         manifest.rec[rec.rel_path].update(status="failed", error=f"render failed: {res.get('error')}")
         outcome.failed.append(rec.rel_path)
