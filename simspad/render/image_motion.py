@@ -4,8 +4,10 @@ Every pixel of a keyframe is unprojected with its depth (the EXR ``Z`` channel) 
 ``camera_to_world``, moved with its object's transform if it shows an animated object (the keyframe's
 ``object_id`` channel and ``object_to_world`` poses), and projected with the pose of a later keyframe
 (:func:`simspad.render.reprojection.image_motion_px`). The distance between the two image positions over the time
-between the keyframes is the pixel's image speed (px/s); the distance over one conventional-frame exposure is
-its motion blur (px). Distributions are over pixels and time: every (pixel, keyframe interval) pair weighs its
+between the keyframes is the pixel's image speed (px/s). A pixel's motion blur (px) in one conventional-frame
+exposure is the extent of the image path its scene point travels during the exposure, followed through the
+keyframes inside it: the diagonal of the path's bounding box (the length of a straight smear; for hand-held
+shake, which reverses within a fast exposure, the span it covers rather than the net displacement). Distributions are over pixels and time: every (pixel, keyframe interval) pair weighs its
 interval's duration, so the adaptive schedule (keyframes dense where motion is fast) does not bias them. They are
 accumulated in a fixed log-spaced histogram (bins :data:`SPEED_BIN_RATIO` wide), so memory does not grow with the
 number of keyframes. Pixels that hit nothing (infinite depth) carry no measurable motion and are left out.
@@ -21,7 +23,7 @@ import numpy as np
 
 from simspad.errors import InputError
 from simspad.io.render_dir import read_keyframe, read_render_dir
-from simspad.render.reprojection import PinholeCamera, image_motion_px
+from simspad.render.reprojection import PinholeCamera, image_motion_px, move_points, project, unproject
 
 #: Histogram range of image speeds (px/s) and of blur lengths (px), log-spaced; below the range counts as 0.
 SPEED_RANGE = (1e-4, 1e8)
@@ -30,6 +32,9 @@ SPEED_BIN_RATIO = 1.002
 #: Keyframe intervals measured at most: beyond, every n-th interval (evenly spread, so the time weighting stays
 #: unbiased) keeps the cost of a long or fast render bounded.
 MAX_INTERVALS = 256
+#: Exposure windows measured at most (evenly spread start keyframes), and keyframes followed inside each.
+MAX_BLUR_WINDOWS = 32
+MAX_BLUR_STEPS = 64
 #: Slack (s) when deciding whether a keyframe lies inside the measured span.
 _TIME_TOLERANCE_S = 1e-9
 
@@ -151,16 +156,41 @@ def measure_image_motion(render_dir, t0: float | None = None, t1: float | None =
         dt = times[i + 1] - times[i]
         frame = read_keyframe(index.files[i], index.width, index.height)
         speed.add(_displacement_px(camera, frame, index, i, i + 1, names) / dt, dt)
-        # Exposure windows that fit in the span start here (if none fits, the first spans the whole render).
-        fits = times[i] + (exposure_s or 0.0) <= times[last] + _TIME_TOLERANCE_S or (
-            i == first and times[first] + (exposure_s or 0.0) > times[last])
-        if exposure_s is not None and fits:
-            j, scale = _exposure_end(times, i, last, float(exposure_s))
-            blur.add(_displacement_px(camera, frame, index, i, j, names) * scale, dt)
+    if exposure_s is not None:
+        # Exposure windows that fit in the span (if none fits, one window spans the whole render).
+        starts = [i for i in range(first, last) if times[i] + exposure_s <= times[last] + _TIME_TOLERANCE_S] or [first]
+        for i in starts[::max(1, math.ceil(len(starts) / MAX_BLUR_WINDOWS))]:
+            frame = read_keyframe(index.files[i], index.width, index.height)
+            blur.add(_path_extent_px(camera, frame, index, i, times, last, float(exposure_s), names),
+                     times[i + 1] - times[i])
     return ImageMotion(speed_px_s_p50=speed.percentile(50), speed_px_s_p95=speed.percentile(95),
                        frame_blur_px_p95=None if exposure_s is None else blur.percentile(95),
                        exposure_s=None if exposure_s is None else float(exposure_s),
                        n_intervals=len(range(first, last, stride)))
+
+
+def _path_extent_px(camera, frame: dict, index, i: int, times: np.ndarray, last: int, exposure_s: float,
+                    names: list) -> np.ndarray:
+    """Extent (px) of the image path of every pixel of keyframe ``i`` during one exposure starting there: its
+    scene point (moved with its object, if any) projected at up to :data:`MAX_BLUR_STEPS` keyframes inside the
+    exposure; the bounding-box diagonal, scaled linearly from the keyframe nearest the exposure's end to the
+    exposure itself (keyframes lie ≤ ``max_flow_px`` of motion apart, so the correction is small)."""
+    j, scale = _exposure_end(times, i, last, exposure_s)
+    steps = np.unique(np.linspace(i + 1, j, min(MAX_BLUR_STEPS, j - i)).round().astype(int))
+    points = unproject(camera, frame["z"], index.poses[i])
+    origin = _objects(index, i, names)
+    col0 = np.arange(camera.width, dtype=np.float64)[None, :] * np.ones((camera.height, 1))
+    row0 = np.arange(camera.height, dtype=np.float64)[:, None] * np.ones((1, camera.width))
+    lo_c, hi_c, lo_r, hi_r = col0.copy(), col0.copy(), row0.copy(), row0.copy()
+    lost = ~np.isfinite(points).all(axis=-1)
+    for k in steps:
+        moved = move_points(points, frame.get("object_id"), origin, _objects(index, int(k), names))
+        col, row, _ = project(camera, moved, index.poses[int(k)])
+        lost |= ~(np.isfinite(col) & np.isfinite(row))
+        lo_c, hi_c = np.fmin(lo_c, col), np.fmax(hi_c, col)
+        lo_r, hi_r = np.fmin(lo_r, row), np.fmax(hi_r, row)
+    extent = np.hypot(hi_c - lo_c, hi_r - lo_r) * scale
+    return extent[~lost]
 
 
 def _exposure_end(times: np.ndarray, i: int, last: int, exposure_s: float) -> tuple[int, float]:
