@@ -14,6 +14,8 @@ MAX_FLOW_PX = 0.5
 MIN_KEYFRAME_RATE_HZ = 1000.0
 #: Rate of the ground-truth frames in a recording and of the evaluation instants, in Hz.
 GT_RATE_HZ = 1000.0
+#: Exposure (s) of the conventional frame whose motion blur a recording states when it has no frame camera.
+FRAME_BLUR_EXPOSURE_S = 10e-3
 #: Seed of renders and sensor streams when none is given.
 SEED = 0
 

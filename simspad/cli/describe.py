@@ -67,6 +67,8 @@ def describe_recording(path) -> str:
                  f"  software    simspad {a.get('simspad_version', '-')}"]
         if a.get("recording_hash"):
             lines.append(f"  hash        {str(a['recording_hash'])[:16]}")
+        if "image_speed_px_s_p50" in a:
+            lines.append(f"  motion      {_motion_text(a)}")
         if rec.has("gt"):
             t = rec.gt.t
             rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
@@ -82,6 +84,16 @@ def describe_recording(path) -> str:
         if not rec.sensors:
             lines.append("    (none)")
     return "\n".join(lines)
+
+
+def _motion_text(a) -> str:
+    """The measured motion attributes of a recording (or its manifest entry) in one line."""
+    text = (f"speed ×{float(a.get('speed_factor', 1.0)):g}: image speed p50 {float(a['image_speed_px_s_p50']):.4g} "
+            f"px/s, p95 {float(a['image_speed_px_s_p95']):.4g} px/s")
+    if "frame_blur_px_p95" in a:
+        text += (f"; blur p95 {float(a['frame_blur_px_p95']):.4g} px in one "
+                 f"{format_duration_s(float(a.get('frame_blur_exposure_s', float('nan'))))} frame")
+    return text
 
 
 def _spad_lines(rec, n_px: int, dur: float) -> list[str]:
@@ -170,6 +182,7 @@ def describe_dataset(path) -> str:
              f"  name        {m.get('name')} (spec hash {str(m.get('spec_hash', ''))[:16]}, seed {m.get('seed')})",
              f"  created     {m.get('created_utc')}, updated {m.get('updated_utc', '-')}",
              f"  lux         {', '.join(f'{x:g}' for x in spec.get('lux', []))}",
+             f"  speed       {', '.join(f'×{x:g}' for x in spec.get('speed', [1.0]))}",
              f"  sensors     {', '.join(spec.get('sensors', {})) or '-'}",
              f"  recordings  {len(recs)}: {by_status['complete']} complete, {by_status['pending']} pending, "
              f"{by_status['failed']} failed; {format_bytes(total)}"]
@@ -178,6 +191,10 @@ def describe_dataset(path) -> str:
     for e in recs:
         if e["status"] == "failed" and e.get("error"):
             lines.append(f"  failed {e['path']}: {e['error']}")
+    measured = [e for e in recs if e.get("motion")]
+    if measured:
+        lines.append("  motion      measured on the renders (image speed over pixels and time)")
+        lines += [f"    {e['path']}: {_motion_text(e['motion'])}" for e in measured]
     renders = m.get("renders", [])
     if renders:
         lines.append(f"  renders     {len(renders)}")

@@ -17,8 +17,9 @@ def describe_spec(path) -> str:
     lines = [f"dataset spec {path}", f"  name        {spec.name}", f"  seed        {spec.seed}",
              f"  output      {spec.output}", f"  spec hash   {spec_hash(spec)[:16]}",
              f"  lux         {', '.join(f'{x:g}' for x in spec.lux)}",
-             f"  sequences   {len(spec.sequences)} (× {len(spec.lux)} lux = {len(spec.sequences) * len(spec.lux)} "
-             "recordings)"]
+             f"  speed       {', '.join(f'×{k:g}' for k in spec.speed)} (trajectories retimed: pose(t) = base(k·t))",
+             f"  sequences   {len(spec.sequences)} (× {len(spec.speed)} speed × {len(spec.lux)} lux = "
+             f"{len(spec.sequences) * len(spec.speed) * len(spec.lux)} recordings)"]
     for s in spec.sequences:
         traj = _short(s.trajectory) if s.trajectory is not None else _default_trajectory_text(s.scene)
         lines.append(f"    {s.name}: scene {_short(s.scene)}, {s.resolution[0]}×{s.resolution[1]} px, {s.spp} spp, "

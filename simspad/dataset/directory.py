@@ -4,8 +4,10 @@
 
     <out>/manifest.json                                   what the folder holds (simspad.io.manifest)
     <out>/.simspad.lock                                   held by the one run writing the folder
-    <out>/renders/<sequence>-<render hash[:12]>/          one render per sequence (simspad.io.render_dir)
-    <out>/recordings/<sequence>/<sequence>_<lux>lx.h5     one recording per (sequence, lux)
+    <out>/renders/<sequence>[_x<k>]-<render hash[:12]>/   one render per (sequence, speed) (simspad.io.render_dir)
+    <out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5  one recording per (sequence, speed, lux)
+
+``_x<k>`` appears for a speed factor k ≠ 1 only (simspad.dataset.speed).
 
 A lock (``fcntl.flock`` on ``<out>/.simspad.lock``) refuses a second concurrent run on one output directory; the
 kernel releases it when the process dies, even by kill -9, and the next run removes the temporary files the
@@ -20,6 +22,7 @@ import re
 import shutil
 from pathlib import Path
 
+from simspad.dataset.speed import speed_suffix
 from simspad.errors import SimSpadError
 from simspad.io.provenance import utc_now
 from simspad.io.render_dir import read_render_dir
@@ -38,9 +41,9 @@ def lux_label(lux: float) -> str:
     return str(int(lux)) if lux.is_integer() and abs(lux) < 1e15 else repr(lux)
 
 
-def recording_rel_path(sequence_name: str, lux: float) -> str:
-    """``recordings/<sequence>/<sequence>_<lux>lx.h5``."""
-    return f"{RECORDINGS_DIR}/{sequence_name}/{sequence_name}_{lux_label(lux)}lx.h5"
+def recording_rel_path(sequence_name: str, lux: float, speed: float = 1.0) -> str:
+    """``recordings/<sequence>/<sequence>_<lux>lx.h5`` (speed 1), ``.../<sequence>_x<speed>_<lux>lx.h5`` (others)."""
+    return f"{RECORDINGS_DIR}/{sequence_name}/{sequence_name}{speed_suffix(speed)}_{lux_label(lux)}lx.h5"
 
 
 

@@ -27,9 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from simspad import defaults
 from simspad.dataset.fault_injection import maybe_inject_fault
+from simspad.dataset.speed import sequence_trajectories
 from simspad.errors import SimSpadError
 from simspad.io.hashing import file_sha256
+from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import RenderPlan
@@ -104,7 +107,8 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         select_variant()
         seq = task.sequence
         final = Path(out_dir) / task.rel_dir
-        plan = plan_render(seq.scene, seq.trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
+        trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
+        plan = plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
         make_out_dir(final)
         existing = [i for i, name in enumerate(plan.names) if (final / name).is_file()]
         return {"ok": True, "plan": plan.to_dict(), "n_keyframes": plan.n_keyframes, "existing": existing,
@@ -118,12 +122,13 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
 _SCENE_CACHE: dict = {}
 
 
-def _cached_scene(seq, plan: RenderPlan):
-    key = (repr(seq.scene), repr(seq.trajectory), plan.width, plan.height, plan.spp, plan.variant, plan.scene_hash,
-           plan.trajectory_hash)
+def _cached_scene(seq, speed_factor: float, plan: RenderPlan):
+    key = (repr(seq.scene), repr(seq.trajectory), float(speed_factor), plan.width, plan.height, plan.spp,
+           plan.variant, plan.scene_hash, plan.trajectory_hash)
     if key not in _SCENE_CACHE:
         _SCENE_CACHE.clear()
-        _SCENE_CACHE[key] = load_scene(seq.scene, seq.trajectory, plan.width, plan.height, plan.spp, plan.variant)
+        trajectory = sequence_trajectories(seq.scene, seq.trajectory, speed_factor)
+        _SCENE_CACHE[key] = load_scene(seq.scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
     return _SCENE_CACHE[key]
 
 
@@ -146,8 +151,8 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         _set_render_threads(threads)
         seq = task.sequence
         render_plan = RenderPlan.from_dict(plan)
-        done = render_keyframes(seq.scene, seq.trajectory, render_plan, indices, out_dir=Path(out_dir) / task.rel_dir,
-                                loaded=_cached_scene(seq, render_plan))
+        done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=Path(out_dir) / task.rel_dir,
+                                loaded=_cached_scene(seq, task.speed_factor, render_plan))
         return {"ok": True, "n_rendered": len(done.frame_times_s), "n_reused": done.n_reused,
                 "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),
                 "host": socket.gethostname()}
@@ -171,13 +176,27 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         settings = RecordingSettings(lux=task.lux, sensors=dict(task.sensors), start_s=task.start_s,
                                      duration_s=task.duration_s, seed=task.seed, stream_key=tuple(task.stream_key),
                                      gt_rate_hz=task.gt_rate_hz, optics=task.optics)
-        simulate_recording(Path(out_dir) / task.render_rel_dir, out_path, settings, metadata=dict(task.metadata),
-                           progress=False)
+        render_dir = Path(out_dir) / task.render_rel_dir
+        measured = {}
+        simulate_recording(render_dir, out_path, settings, metadata=dict(task.metadata), progress=False,
+                           motion_attrs=_motion_measurement(render_dir, task, measured))
         seconds = time.perf_counter() - t0
         return {"ok": True, "seconds": seconds, "size": out_path.stat().st_size, "sha256": file_sha256(out_path),
-                "host": socket.gethostname()}
+                "host": socket.gethostname(), "motion": measured}
     except BaseException as exc:  # noqa: BLE001
         return _error_result(exc, t0)
+
+
+def _motion_measurement(render_dir: Path, task, measured: dict):
+    """``attrs(frame_exposure_s)``: the recording's motion attributes, measured on its render over its span (the
+    blur over the frame camera's exposure, or over :data:`simspad.defaults.FRAME_BLUR_EXPOSURE_S` without one),
+    also left in ``measured`` for the manifest."""
+    def attrs(frame_exposure_s):
+        exposure_s = defaults.FRAME_BLUR_EXPOSURE_S if frame_exposure_s is None else float(frame_exposure_s)
+        motion = measure_image_motion(render_dir, task.start_s, task.start_s + task.duration_s, exposure_s)
+        measured.update(motion_attrs(motion, task.speed_factor))
+        return measured
+    return attrs
 
 
 def default_workers() -> int:

@@ -1,13 +1,15 @@
-"""Dataset generation (``simspad generate``): render each sequence once, simulate every sequence × lux.
+"""Dataset generation (``simspad generate``): render each sequence once per speed, simulate every
+sequence × speed × lux.
 
 The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`) through the driver's
-:class:`~simspad.dataset.task_queue.TaskQueue`: one render per sequence (shared by all lux levels and sensors) into
-``<out>/renders/<sequence>-<hash>/`` — a plan task, then chunks of keyframes spread over every worker, then
-``timeline.json`` written here once every chunk is back — then one simulation per (sequence, lux) into
-``<out>/recordings/<sequence>/<sequence>_<lux>lx.h5``. Keyframes are written under their final names (each
-atomically), so a killed run's keyframes are kept and the next run renders only the missing ones. The driver (this module, in the
-calling process,
-with :mod:`~simspad.dataset.manifest_state`) is the only writer of ``manifest.json``, which it rewrites atomically as results arrive.
+:class:`~simspad.dataset.task_queue.TaskQueue`: one render per (sequence, speed) (shared by all lux levels and
+sensors) into ``<out>/renders/<sequence>[_x<k>]-<hash>/`` — a plan task, then chunks of keyframes spread over every
+worker, then ``timeline.json`` written here once every chunk is back — then one simulation per (sequence, speed,
+lux) into ``<out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5``, which also states the image motion
+measured on its render (:mod:`simspad.render.image_motion`). Keyframes are written under their final names (each
+atomically), so a killed run's keyframes are kept and the next run renders only the missing ones. The driver (this
+module, in the calling process, with :mod:`~simspad.dataset.manifest_state`) is the only writer of
+``manifest.json``, which it rewrites atomically as results arrive.
 
 Determinism: every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key
 ``(sequence, lux)``), every render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same
@@ -295,7 +297,7 @@ def _render_done(manifest, task: RenderTask, res, waiting, queue, ex, outcome, r
             queue.add(_simulation_job(ex, rec))
         return
     entry.update(status="failed", error=res.get("error"))
-    log(f"render of {task.sequence.name} failed: {res.get('error')}")
+    log(f"render of {task.sequence.name} ×{task.speed_factor:g} failed: {res.get('error')}")
     for rec in dependants:
         manifest.rec[rec.rel_path].update(status="failed", error=f"render failed: {res.get('error')}")
         outcome.failed.append(rec.rel_path)
@@ -310,6 +312,8 @@ def _simulation_done(manifest, task: RecordingTask, res, render_times, outcome, 
     entry["timings"] = timings
     if res.get("ok"):
         entry.update(status="complete", size=res["size"], sha256=res["sha256"])
+        if res.get("motion"):
+            entry["motion"] = res["motion"]
         entry.pop("error", None)
         outcome.done.append(task.rel_path)
     else:

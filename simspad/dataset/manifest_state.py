@@ -53,19 +53,23 @@ class ManifestState:
                      "recordings": [], "renders": []}
         self.rec = {}
         for task in plan.recordings:
-            entry = {"sequence": task.sequence_name, "scene": task.scene, "lux": task.lux, "path": task.rel_path,
+            entry = {"sequence": task.sequence_name, "scene": task.scene, "speed_factor": task.speed_factor,
+                     "lux": task.lux, "path": task.rel_path,
                      "size": None, "sha256": None, "status": "pending", "recording_hash": task.recording_hash,
                      "render": task.render_rel_dir, "timings": {}}
             prev = old.get(task.rel_path)
             if prev and prev.get("recording_hash") == task.recording_hash and prev.get("status") == "complete":
                 for key in ("size", "sha256", "status", "timings"):
                     entry[key] = prev.get(key)
+                if "motion" in prev:  # the measured image motion (simspad.render.image_motion) of a kept file
+                    entry["motion"] = prev["motion"]
             self.rec[task.rel_path] = entry
             self.data["recordings"].append(entry)
         self.ren = {}
         for task in plan.renders:
             prev = old_renders.get(task.rel_dir) or {}
-            entry = {"sequence": task.sequence.name, "scene": scene_name(task.sequence.scene), "path": task.rel_dir,
+            entry = {"sequence": task.sequence.name, "scene": scene_name(task.sequence.scene),
+                     "speed_factor": task.speed_factor, "path": task.rel_dir,
                      "render_hash": task.render_hash, "status": prev.get("status", "pending"),
                      "n_keyframes": prev.get("n_keyframes"), "timings": prev.get("timings", {})}
             self.ren[task.rel_dir] = entry

@@ -1,10 +1,12 @@
 """The job plan: every render and recording a spec asks for, with the seeds and hashes that make it reproducible.
 
-One render per sequence (shared by all lux levels and sensors), one simulation per (sequence, lux). Every
-recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key ``(sequence, lux)``), every render
-from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same whatever the executor, the worker count
-or the order. Each task carries a hash of everything its output depends on (spec content, scene and trajectory
-bytes, package versions, :data:`JOB_SCHEME_VERSION`), which decides on a re-run whether it must be redone.
+One render per (sequence, speed) (shared by all lux levels and sensors), one simulation per (sequence, speed, lux).
+Every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key ``(sequence, lux)``), every
+render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same whatever the executor, the
+worker count or the order. A speed factor k ≠ 1 (:mod:`simspad.dataset.speed`) appends ``("speed", k)`` to both
+keys and ``_x<k>`` to the names; k = 1 keeps them as a spec without a speed axis has them. Each task carries a
+hash of everything its output depends on (spec content, scene and trajectory bytes, package versions, the speed
+factor, :data:`JOB_SCHEME_VERSION`), which decides on a re-run whether it must be redone.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from simspad import __version__
 from simspad.dataset.directory import RENDERS_DIR, recording_rel_path
 from simspad.dataset.portable import portable_sequence, portable_trajectory
 from simspad.dataset.spec_hashing import canonical_json, sequence_hash, spec_hash
+from simspad.dataset.speed import speed_keys, speed_suffix
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_seed
 from simspad.scenes.library import resolve_scene
@@ -34,6 +37,7 @@ class RenderTask:
     render_hash: str
     rel_dir: str
     seed: int
+    speed_factor: float = 1.0  # trajectory played this many times faster (simspad.motion.retiming)
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,7 @@ class RecordingTask:
     gt_rate_hz: float
     optics: Any  # simspad.physics.radiometry.Optics
     metadata: tuple  # ((key, value), ...): root attrs of the recording
+    speed_factor: float = 1.0  # trajectory played this many times faster (simspad.motion.retiming)
 
 
 @dataclass(frozen=True)
@@ -73,8 +78,8 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def _render_seed(dataset_seed: int, sequence_name: str) -> int:
-    return int(child_seed(dataset_seed, sequence_name, "render").generate_state(1)[0])
+def _render_seed(dataset_seed: int, sequence_name: str, speed: float = 1.0) -> int:
+    return int(child_seed(dataset_seed, sequence_name, "render", *speed_keys(speed)).generate_state(1)[0])
 
 
 def scene_name(scene: str) -> str:
@@ -93,27 +98,47 @@ def make_plan(spec, created_utc: str) -> Plan:
     sensors_dict = {kind: s.to_dict() for kind, s in spec.sensors.items()}
     renders, recordings = [], []
     for seq in spec.sequences:
-        seed = _render_seed(spec.seed, seq.name)
-        render_hash = spec_hash({"render": sequence_hash(seq), "seed": seed, "versions": versions})
-        render = RenderTask(seq, render_hash, f"{RENDERS_DIR}/{seq.name}-{render_hash[:12]}", seed)
-        renders.append(render)
         seq_hash = sequence_hash(seq, spec)
         scene = scene_name(seq.scene)
-        for lux in spec.lux:
-            lux = float(lux)
-            stream_key = (seq.name, lux)
-            # What the file depends on; stored in the recording as its "spec" attr, so the hash and the file agree.
-            rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": portable_sequence(seq, spec.source_path), "lux": lux,
-                        "stream_key": list(stream_key), "sensors": sensors_dict,
-                        "evaluation": spec.evaluation.to_dict(), "optics": dataclasses.asdict(optics)}
-            rec_hash = spec_hash({"dataset": spec.name, "sequence": seq_hash, "render": render_hash, "lux": lux,
-                                  "stream_key": list(stream_key), "optics": dataclasses.asdict(optics),
-                                  "versions": versions})
-            metadata = {"sequence": seq.name, "scene": scene, "dataset": spec.name, "spec": canonical_json(rec_spec), "recording_hash": rec_hash,
-                        "created_utc": created_utc, "trajectory": portable_trajectory(seq, spec.source_path)}
-            recordings.append(RecordingTask(
-                sequence_name=seq.name, scene=scene, lux=lux, rel_path=recording_rel_path(seq.name, lux),
-                render_rel_dir=render.rel_dir, recording_hash=rec_hash, sensors=sensors, start_s=seq.start_s,
-                duration_s=seq.duration_s, seed=spec.seed, stream_key=stream_key,
-                gt_rate_hz=spec.evaluation.rate_hz, optics=optics, metadata=tuple(sorted(metadata.items()))))
+        for k in spec.speed:
+            render = _render_task(spec, seq, float(k), versions)
+            renders.append(render)
+            for lux in spec.lux:
+                recordings.append(_recording_task(spec, seq, float(k), float(lux), render, seq_hash, scene,
+                                                  sensors, sensors_dict, optics, versions, created_utc))
     return Plan(tuple(renders), tuple(recordings))
+
+
+def _render_task(spec, seq, k: float, versions: dict) -> RenderTask:
+    """The render of ``seq`` at speed ``k`` (k = 1: exactly the render of a spec without a speed axis)."""
+    seed = _render_seed(spec.seed, seq.name, k)
+    key = {"render": sequence_hash(seq), "seed": seed, "versions": versions}
+    if k != 1.0:
+        key["speed_factor"] = k
+    render_hash = spec_hash(key)
+    return RenderTask(seq, render_hash, f"{RENDERS_DIR}/{seq.name}{speed_suffix(k)}-{render_hash[:12]}", seed,
+                      speed_factor=k)
+
+
+def _recording_task(spec, seq, k: float, lux: float, render: RenderTask, seq_hash: str, scene: str, sensors,
+                    sensors_dict, optics, versions, created_utc: str) -> RecordingTask:
+    """The (sequence, speed, lux) recording (k = 1: exactly the recording of a spec without a speed axis)."""
+    stream_key = (seq.name, lux, *speed_keys(k))
+    # What the file depends on; stored in the recording as its "spec" attr, so the hash and the file agree.
+    rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": portable_sequence(seq, spec.source_path), "lux": lux,
+                "stream_key": list(stream_key), "sensors": sensors_dict,
+                "evaluation": spec.evaluation.to_dict(), "optics": dataclasses.asdict(optics)}
+    hash_key = {"dataset": spec.name, "sequence": seq_hash, "render": render.render_hash, "lux": lux,
+                "stream_key": list(stream_key), "optics": dataclasses.asdict(optics), "versions": versions}
+    metadata = {"sequence": seq.name, "scene": scene, "dataset": spec.name,
+                "trajectory": portable_trajectory(seq, spec.source_path)}
+    if k != 1.0:
+        rec_spec["speed_factor"] = hash_key["speed_factor"] = metadata["speed_factor"] = k
+    rec_hash = spec_hash(hash_key)
+    metadata.update({"spec": canonical_json(rec_spec), "recording_hash": rec_hash, "created_utc": created_utc})
+    return RecordingTask(
+        sequence_name=seq.name, scene=scene, lux=lux, rel_path=recording_rel_path(seq.name, lux, k),
+        render_rel_dir=render.rel_dir, recording_hash=rec_hash, sensors=sensors, start_s=seq.start_s,
+        duration_s=seq.duration_s, seed=spec.seed, stream_key=stream_key,
+        gt_rate_hz=spec.evaluation.rate_hz, optics=optics, metadata=tuple(sorted(metadata.items())),
+        speed_factor=k)

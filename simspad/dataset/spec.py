@@ -7,6 +7,7 @@ resolution, samples per pixel), the lux levels, the sensors (preset + overrides)
     seed = 1
     output = "output/mini"          # relative to the current directory
     lux = [1, 10, 100]
+    speed = [1.0, 8.0]              # optional speed factors (default [1.0]): trajectories played k× faster
 
     [[sequences]]
     scene = "office"                # built-in name, or a scene folder / .xml (relative to this file)
@@ -123,12 +124,15 @@ class DatasetSpec:
     sensors: dict[str, SensorSpec]
     evaluation: EvaluationSpec = EvaluationSpec()
     source_path: Path | None = None
+    #: Speed factors k: every sequence is produced with its trajectory retimed, pose(t) = base pose(k·t).
+    speed: tuple[float, ...] = (1.0,)
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     def to_dict(self) -> dict:
         """The validated spec as plain JSON-able data (for the manifest and recording attrs)."""
         return {"name": self.name, "seed": self.seed, "output": str(self.output),
                 "sequences": [s.to_dict() for s in self.sequences], "lux": list(self.lux),
+                "speed": list(self.speed),
                 "sensors": {k: s.to_dict() for k, s in self.sensors.items()},
                 "evaluation": self.evaluation.to_dict()}
 

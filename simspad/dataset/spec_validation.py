@@ -16,6 +16,7 @@ from pathlib import Path
 from simspad import defaults
 from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
+from simspad.dataset.speed import DEFAULT_SPEEDS, coverage_problem
 from simspad.errors import SimSpadError, SpecError
 from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
@@ -23,7 +24,7 @@ from simspad.methods.registry import available_methods
 from simspad.scenes.library import resolve_scene
 from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
 
-_TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation")
+_TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
 _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
              "min_rate_hz")
 _EVAL_KEYS = ("rate_hz", "methods")
@@ -140,14 +141,16 @@ def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> Dat
         output_path = Path.cwd() / output_path
 
     lux = _validate_lux(raw, err)
+    speed = _validate_speed(raw, err)
     sequences = _validate_sequences(raw, base, err)
+    _check_speed_coverage(sequences, speed, err)
     sensors = _validate_sensors(raw, err)
     evaluation = _validate_evaluation(raw, err)
     if err.lines:
         return None
     spec = DatasetSpec(name=name, seed=seed, output=output_path, sequences=tuple(sequences), lux=tuple(lux),
                        sensors=sensors, evaluation=evaluation, source_path=path.resolve() if has_file else None,
-                       raw=raw)
+                       raw=raw, speed=tuple(speed))
     for field_path, message in spec_limit_problems(spec):  # bounds and cross-field rules, before any work
         err.add(field_path, message)
     return spec
@@ -171,6 +174,34 @@ def _validate_lux(raw: dict, err: _Errors) -> list[float]:
                 err.add(f"lux[{i}]", f"duplicate lux level {v!r} (expected distinct levels)")
             out.append(x)
     return out
+
+
+def _validate_speed(raw: dict, err: _Errors) -> list[float]:
+    """The speed factors (default [1.0]), checked like ``lux``: a number or a non-empty list of distinct
+    numbers > 0."""
+    value = raw.get("speed", list(DEFAULT_SPEEDS))
+    if _is_number(value):
+        value = [value]
+    if not isinstance(value, list) or not value:
+        err.add("speed", f"got {_type_name(value)} {value!r} (expected a non-empty list of speed factors > 0)")
+        return []
+    out = []
+    for i, v in enumerate(value):
+        x = _number(err, f"speed[{i}]", v, positive=True, what="a speed factor > 0 (1: the trajectory as written)")
+        if x is not None:
+            if x in out:
+                err.add(f"speed[{i}]", f"duplicate speed factor {v!r} (expected distinct factors)")
+            out.append(x)
+    return out
+
+
+def _check_speed_coverage(sequences: list[SequenceSpec], speeds: list[float], err: _Errors) -> None:
+    """Every sequence played at every speed factor must stay within its trajectory's coverage."""
+    for seq in sequences:
+        for k in speeds:
+            problem = coverage_problem(seq.scene, seq.trajectory, seq.start_s, seq.duration_s, k)
+            if problem is not None:
+                err.add("speed", f"sequence {seq.name!r}: {problem}")
 
 
 def _validate_sequences(raw: dict, base: Path, err: _Errors) -> list[SequenceSpec]:

@@ -9,9 +9,12 @@ Layout::
 
     {"format": "simspad-dataset", "version": 1, "name": ..., "spec": {...}, "spec_hash": ..., "seed": ...,
      "created_utc": ..., "updated_utc": ..., "simspad_version": ...,
-     "recordings": [{"sequence", "scene", "lux", "path", "size", "sha256", "status", "recording_hash",
-                     "render": "renders/<sequence>-<hash>", "timings": {...}, "error"?}],
-     "renders": [{"sequence", "scene", "path", "render_hash", "status", "n_keyframes"?, "timings"}]}
+     "recordings": [{"sequence", "scene", "speed_factor", "lux", "path", "size", "sha256", "status",
+                     "recording_hash", "render": "renders/<sequence>-<hash>", "timings": {...},
+                     "motion"?: {speed_factor, image_speed_px_s_p50, image_speed_px_s_p95, frame_blur_px_p95,
+                                 frame_blur_exposure_s}, "error"?}],
+     "renders": [{"sequence", "scene", "speed_factor", "path", "render_hash", "status", "n_keyframes"?,
+                  "timings"}]}
 
 ``status`` is ``"complete"``, ``"pending"`` or ``"failed"``. ``recording_hash`` is the hash of everything that
 affects that one file (render inputs, lux, sensor parameters, seed, stream key, ground-truth rate, optics,

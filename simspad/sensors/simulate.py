@@ -66,7 +66,7 @@ class RecordingSettings:
 
 
 def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, metadata: dict | None = None,
-                       progress: bool = False) -> Path:
+                       progress: bool = False, motion_attrs=None) -> Path:
     """Simulate ``settings.sensors`` on a render directory at ``settings.lux`` and write the recording ``out_path``.
 
     Parameters
@@ -82,6 +82,10 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
         text), ``created_utc`` — pass a fixed value for byte-identical files).
     progress : bool
         Show progress bars.
+    motion_attrs : callable, optional
+        ``motion_attrs(frame_exposure_s) -> dict``: root attributes stating the image motion the recording
+        contains, given the frame camera's resolved exposure in seconds (None without a frame camera); called
+        once the sensors have run. The caller measures the motion (this layer does not read renders' geometry).
 
     Returns
     -------
@@ -118,12 +122,17 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     common = {"lux": float(lux), "flux_scale": float(flux_tl.scale),
               **{f"optics_{k}": v for k, v in optics.to_attrs().items()}}
     with RecordingWriter(out_path, attrs) as writer:
+        frame_exposure_s = None
         for kind in ("spad", "frames", "events"):
             if kind in sensors:
-                runners[kind](writer, sensors[kind], child_rng(seed, *stream_key, kind))
+                written = runners[kind](writer, sensors[kind], child_rng(seed, *stream_key, kind))
+                if kind == "frames" and isinstance(written, dict):
+                    frame_exposure_s = written.get("exposure_s")
                 writer.set_attrs(kind, **common)
         write_ground_truth(writer, flux_tl, t0, t1, settings.gt_rate_hz)
         writer.set_attrs("gt", **common)
+        if motion_attrs is not None:
+            writer.set_attrs("/", **motion_attrs(frame_exposure_s))
     return out_path
 
 

@@ -144,7 +144,8 @@ def test_spec_hash_is_stable_and_tracks_content(workdir):
 def test_default_spec_is_valid():
     spec = load_spec(default_spec_path())
     assert default_spec_path().name == "mini.toml"
-    assert spec.name == "mini" and spec.lux == (1.0, 10.0, 100.0, 1000.0, 10000.0)
+    assert spec.name == "mini" and spec.lux == (1.0, 100.0, 10000.0)
+    assert len(spec.speed) >= 2 and spec.speed[0] == 1.0  # the regime: as written and much faster
     assert [s.scene for s in spec.sequences] == ["office", "piano", "plant", "siemens-star", "fan"]
     assert set(spec.sensors) == {"spad", "frames", "events"}
     # The embedded default must stay laptop-sized: small grids and tens of milliseconds.

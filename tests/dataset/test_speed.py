@@ -1,0 +1,131 @@
+"""The speed axis of a dataset: spec checks, refusal past a trajectory's coverage, names and seeds per speed, a
+spec without ``speed`` planned exactly as before, and a k× recording whose poses are the base trajectory at k·t
+and whose measured image motion is stated in its attributes."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from simspad.dataset.executors import ExecutorConfig
+from simspad.dataset.generate import generate
+from simspad.dataset.plan import make_plan
+from simspad.dataset.spec_validation import load_spec
+from simspad.errors import SpecError
+from simspad.io.bundled import TRAJECTORIES_DIR
+from simspad.io.manifest import read_manifest
+from simspad.io.trajectory_files import load_trajectory
+
+MOTION_ATTRS = ("speed_factor", "image_speed_px_s_p50", "image_speed_px_s_p95", "frame_blur_px_p95")
+
+
+def _spec(tmp_path, speed_line: str, *, duration_s=0.05, resolution=(80, 60), sensors="") -> object:
+    path = tmp_path / "spec.toml"
+    path.write_text(f"""
+name = "s"
+seed = 3
+output = "{tmp_path / 'out'}"
+lux = [10, 100]
+{speed_line}
+
+[[sequences]]
+scene = "office"
+duration_s = {duration_s}
+resolution = [{resolution[0]}, {resolution[1]}]
+spp = 1
+
+[[sequences]]
+scene = "fan"
+duration_s = {duration_s}
+resolution = [{resolution[0]}, {resolution[1]}]
+spp = 1
+{sensors}
+""")
+    return path
+
+
+def test_spec_without_speed_plans_exactly_as_speed_one(tmp_path):
+    plain = make_plan(load_spec(_spec(tmp_path, "")), "2025-01-01T00:00:00Z")
+    one = make_plan(load_spec(_spec(tmp_path, "speed = [1.0]")), "2025-01-01T00:00:00Z")
+    assert plain == one
+    assert [r.rel_path for r in plain.recordings][:2] == ["recordings/office/office_10lx.h5",
+                                                          "recordings/office/office_100lx.h5"]
+    assert all("speed_factor" not in dict(r.metadata) for r in plain.recordings)
+
+
+def test_each_speed_gets_its_own_render_names_and_seeds(tmp_path):
+    plain = make_plan(load_spec(_spec(tmp_path, "")), "2025-01-01T00:00:00Z")
+    both = make_plan(load_spec(_spec(tmp_path, "speed = [1, 8]")), "2025-01-01T00:00:00Z")
+    assert len(both.renders) == 4 and len(both.recordings) == 8
+    ones = [r for r in both.recordings if r.speed_factor == 1.0]
+    assert ones == list(plain.recordings)  # factor 1 untouched by the presence of other speeds
+    fast = [r for r in both.recordings if r.speed_factor == 8.0]
+    assert [r.rel_path for r in fast[:2]] == ["recordings/office/office_x8_10lx.h5",
+                                              "recordings/office/office_x8_100lx.h5"]
+    assert fast[0].stream_key == ("office", 10.0, "speed", 8.0)
+    assert dict(fast[0].metadata)["speed_factor"] == 8.0
+    fast_render = next(r for r in both.renders if r.rel_dir == fast[0].render_rel_dir)
+    base_render = both.renders[0]
+    assert fast_render.rel_dir.startswith("renders/office_x8-")
+    assert fast_render.seed != base_render.seed and fast_render.render_hash != base_render.render_hash
+    assert len({r.recording_hash for r in both.recordings}) == 8
+
+
+@pytest.mark.parametrize("line, message", [
+    ("speed = [1, 1.0]", "speed[1]: duplicate speed factor"),
+    ("speed = [0]", "speed[0]: must be > 0"),
+    ("speed = []", "speed: got list"),
+    ('speed = ["fast"]', "speed[0]: got string"),
+])
+def test_bad_speed_refused_naming_the_field(tmp_path, line, message):
+    with pytest.raises(SpecError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        load_spec(_spec(tmp_path, line))
+
+
+def test_factor_past_coverage_refused_naming_sequence_and_coverage(tmp_path, simspad_cli):
+    # office.toml and fan.toml cover 0–2 s: 0.05 s at ×50 would play 0–2.5 s
+    path = _spec(tmp_path, "speed = [1, 50]")
+    with pytest.raises(SpecError) as info:
+        load_spec(path)
+    text = info.value.format()
+    assert "sequence 'office'" in text and "sequence 'fan'" in text
+    assert "plays 0–2.5 s" in text and "covers 0–2 s" in text and "factor ≤ 40" in text
+    done = simspad_cli.run("info", path)  # `simspad info SPEC` refuses it before any work
+    assert done.returncode == 2, done.stderr
+    assert "sequence 'office'" in done.stderr and "covers 0–2 s" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_path):
+    k = 4.0
+    spec = load_spec(_spec(tmp_path, f"speed = [1, {k:g}]", duration_s=0.004, resolution=(24, 18),
+                           sensors='[sensors.frames]\npreset = "blackfly_s"\nframe_rate_hz = 1000.0\n'
+                                   'exposure_s = 0.0005'))
+    result = generate(spec, tmp_path / "out", ExecutorConfig(workers=1), progress=False,
+                      created_utc="2025-01-01T00:00:00Z")
+    base = load_trajectory(TRAJECTORIES_DIR / "office.toml")
+    measured = {}
+    for speed, name in ((1.0, "office_10lx.h5"), (k, f"office_x{k:g}_10lx.h5")):
+        with h5py.File(result.out_dir / "recordings" / "office" / name, "r") as f:
+            t = f["poses/t"][()]
+            np.testing.assert_allclose(f["poses/camera_to_world"][()], base.camera.pose(speed * t), rtol=0,
+                                       atol=1e-9)
+            assert f.attrs["speed_factor"] == speed
+            assert f.attrs["frame_blur_exposure_s"] == pytest.approx(0.0005)
+            measured[speed] = {a: float(f.attrs[a]) for a in MOTION_ATTRS}
+    # a hand-held camera k× faster plays k× more of its (irregular) path: it moves and blurs more
+    assert measured[k]["image_speed_px_s_p50"] > measured[1.0]["image_speed_px_s_p50"] > 0
+    assert measured[k]["frame_blur_px_p95"] > measured[1.0]["frame_blur_px_p95"] > 0
+    # the fan's blades spin at a constant rate on their own (static camera): the measurement follows the objects,
+    # and k× the spin is k× the blade speed
+    fan = {}
+    for speed, name in ((1.0, "fan_10lx.h5"), (k, f"fan_x{k:g}_10lx.h5")):
+        with h5py.File(result.out_dir / "recordings" / "fan" / name, "r") as f:
+            fan[speed] = float(f.attrs["image_speed_px_s_p95"])
+    assert fan[1.0] > 100.0
+    assert fan[k] == pytest.approx(k * fan[1.0], rel=0.15)
+    entries = {e["path"]: e for e in read_manifest(result.out_dir)["recordings"]}
+    entry = entries[f"recordings/office/office_x{k:g}_10lx.h5"]
+    assert entry["speed_factor"] == k and entry["motion"]["image_speed_px_s_p95"] > 0
