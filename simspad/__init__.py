@@ -1,6 +1,7 @@
 """SimSPAD: physically rendered synthetic SPAD, frame and event datasets.
 
-See ``DESIGN.md`` (the contract) and ``docs/internals.md`` (the package's layers and where to add things).
+See ``docs/format.md`` (the file formats), ``docs/sensors.md`` (the physics), ``docs/methods.md`` (methods and
+evaluation) and ``docs/internals.md`` (the package's layers and where to add things).
 
 :func:`open_recording` reads a recording (``.h5``) for analysis or machine learning: ``rec.events.windows(dt_s)``,
 ``rec.spad.blocks(n)``, ``rec.frames.items()`` and ``rec.gt.items()`` are lazy sequences usable as a

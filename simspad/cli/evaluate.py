@@ -14,7 +14,7 @@ def summary_table(rows: list[dict]) -> str:
     """A short text table of the rows (for the terminal)."""
     lines = [f"{'method':<20} {'recording':<28} {'PSNR dB':>8} {'SSIM':>6} {'kHz/px':>9}"]
     for r in rows:
-        key = recording_key(r["sequence"], r["lux"])[:28]
+        key = recording_key(r["sequence"], r["lux"], r.get("speed_factor", 1.0))[:28]
         if r.get("error"):
             lines.append(f"{r['method'][:20]:<20} {key:<28} FAILED: {r['error'][:80]}")
         else:

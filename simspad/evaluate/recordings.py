@@ -114,7 +114,7 @@ def fill_entry(entry: RecordingEntry) -> RecordingEntry:
         entry.lux = float(rec.lux)
         entry.speed_factor = _attr_float(rec.attrs, "speed_factor", 1.0, entry.path)
         entry.image_speed_px_s = _attr_float(rec.attrs, "image_speed_px_s_p50", float("nan"), entry.path)
-    entry.key = recording_key(entry.sequence, entry.lux)
+    entry.key = recording_key(entry.sequence, entry.lux, entry.speed_factor)
     return entry
 
 

@@ -3,7 +3,7 @@
 Everything is read from a recording's attrs (DESIGN §5), never from the simulator, so the same code inverts
 real captures converted to the recording layout.
 
-SPAD (DESIGN §4, REFERENCES "SPAD imaging"): a bin's bit is 1 with probability
+SPAD (DESIGN §4; Ma et al., SIGGRAPH 2020): a bin's bit is 1 with probability
 ``p = 1 − exp(−(q·Φ + r_dark)·gate_s)``, with ``q = qe·fill_factor·pixel_pitch_m²`` the detection efficiency per
 unit photon irradiance (m²), so ``q·Φ`` is the detection rate of a pixel. With S ones in n bins the ML estimate
 is ``Φ̂ = (−ln(1 − S/n)/gate_s − r_dark)/q`` (S = n clamped to n − 1 as in the QBP code) and, by the Fisher

@@ -6,7 +6,8 @@ recordings, never the simulator) holds. Every function takes the same arguments 
 ``q_m2 = qe·fill_factor·pixel_pitch_m²`` is the detection area (detections s⁻¹ per photon s⁻¹ m⁻², so ``q·Φ`` is
 a pixel's detection rate), ``gate_s`` the gate in seconds and ``dcr_cps`` the dark count rate.
 
-Sources: REFERENCES.md "SPAD imaging" (QBP code ``genBinImg.m``, ``mleIntensity.m``).
+Sources: the binary-SPAD image formation and ML estimator of quanta burst photography (Ma et al., SIGGRAPH 2020,
+and its released code ``genBinImg.m``, ``mleIntensity.m``).
 """
 
 from __future__ import annotations
