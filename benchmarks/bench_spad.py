@@ -201,7 +201,7 @@ def warm_up_seconds() -> float:
 
 
 def lux_for_probability(p: float, params: SpadParams) -> float:
-    """Mid-grey scene illuminance giving mean P(1) = p per 10.24 µs bin with the presets at f/2 (DESIGN §3)."""
+    """Mid-grey scene illuminance giving mean P(1) = p per 10.24 µs bin with the presets at f/2 (docs/sensors.md)."""
     from simspad.physics.radiometry import flux_scale
 
     rate = -math.log1p(-p) / params.bin_s

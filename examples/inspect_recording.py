@@ -5,7 +5,7 @@ Run on any recording, e.g. one of the mini dataset::
     python examples/inspect_recording.py output/mini/recordings/fan/fan_10lx.h5 --out fan_10lx.png
 
 Panels: the sharp ground-truth irradiance; one SPAD binary frame; n SPAD bins around the instant inverted with
-the ML estimator (DESIGN §4) in the same units as the ground truth; the conventional frame whose exposure holds
+the ML estimator (docs/sensors.md) in the same units as the ground truth; the conventional frame whose exposure holds
 the instant (DN, black level removed); 1 ms of events (ON red, OFF blue). The printout compares the SPAD
 estimate with the ground truth averaged over the same bins, against the estimator's predicted spread, over the
 pixels where that prediction applies: hot pixels, zero estimates and nearly empty or full pixels are excluded and

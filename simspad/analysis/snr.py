@@ -2,8 +2,8 @@ r"""Analytic SNR versus photon flux of the three sensors (the reference paper's 
 
 The common abscissa is the photon irradiance at the sensor plane Φ (photons s⁻¹ m⁻²); each sensor turns it into
 its own per-pixel rate with its pitch, fill factor and quantum efficiency (``simspad.sensors.presets``), exactly as
-the simulator does (DESIGN §3): a pixel detects λ = Φ·pitch²·fill_factor·qe. The top axis gives the scene
-illuminance of a middle-grey scene at f/2 (DESIGN §3 lux convention, ``simspad.physics.radiometry.flux_scale``). All
+the simulator does (docs/sensors.md): a pixel detects λ = Φ·pitch²·fill_factor·qe. The top axis gives the scene
+illuminance of a middle-grey scene at f/2 (docs/sensors.md lux convention, ``simspad.physics.radiometry.flux_scale``). All
 sensors observe one exposure window T (default 10 ms, the frame camera's ``max_exposure_s``).
 
 Conventional camera (EMVA 1288 Release 4.0, §2 linear model; Ingle et al. 2019 suppl. note 7)::
@@ -26,7 +26,7 @@ pre-empts with probability 1 − e^{−qΦτ_d}: B_rel = r_d/(qΦ) + p_ap/(1 −
 code uses a bias of the same structure, r_d/Φ + q·(1+Φτ_d)·p_ap·e^{−qΦτ_d}, with q = 0.4, τ_d = 149.7 ns,
 100 cps, 1 %; here the SwissSPAD2 preset values are used).
 
-Gated binary SPAD, as simulated (DESIGN §4): n = T/bin_s bins with gate τ_g (bin_s, or "auto": the variance-
+Gated binary SPAD, as simulated (docs/sensors.md): n = T/bin_s bins with gate τ_g (bin_s, or "auto": the variance-
 optimal x_s = 1.594 clipped to [min_gate_s, bin_s], an ideal exposure control), x = (qΦ + r_d)·τ_g,
 ML estimator with the dark rate subtracted; its relative variance (delta method, = Var ln Φ̂) and the bias of
 afterpulsing and 4-neighbour crosstalk (which raise P(1) = p = 1 − e^{−x} by ≈ (p_ap + 4p_ct)·p·(1 − p), a
@@ -104,7 +104,7 @@ def snr_spad_free_running_db(flux_ph_s_m2, params: SpadParams | None = None,
 
 def snr_spad_gated_db(flux_ph_s_m2, params: SpadParams | None = None, exposure_s: float = DEFAULT_EXPOSURE_S,
                       gate_s: float | None = None):
-    """SNR (dB) of the gated binary SPAD of DESIGN §4 (n = T/bin_s bins, ML estimator, dark rate subtracted).
+    """SNR (dB) of the gated binary SPAD of docs/sensors.md (n = T/bin_s bins, ML estimator, dark rate subtracted).
 
     ``gate_s``: seconds, None for the whole bin, or ``"auto"``: the gate that minimises the variance,
     x = qΦτ_g = OPTIMAL_GATED_X, clipped to [min_gate_s, bin_s] (an ideal per-flux exposure control).
@@ -126,7 +126,7 @@ def snr_spad_gated_db(flux_ph_s_m2, params: SpadParams | None = None, exposure_s
 
 
 def reference_flux_1lx() -> float:
-    """Sensor-plane photon irradiance of a middle-grey scene at 1 lx (DESIGN §3 defaults), ph s⁻¹ m⁻²."""
+    """Sensor-plane photon irradiance of a middle-grey scene at 1 lx (docs/sensors.md defaults), ph s⁻¹ m⁻²."""
     return float(flux_scale(1.0, 1.0))
 
 

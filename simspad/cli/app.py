@@ -1,4 +1,4 @@
-"""The ``simspad`` command line (DESIGN §6).
+"""The ``simspad`` command line (README.md).
 
 Each subcommand is a thin wrapper: parse options, call one function of the module that owns the concept.
 Bad input raises :class:`simspad.errors.SimSpadError`; :func:`main` prints its message on one line and exits

@@ -1,6 +1,6 @@
 """``simspad info`` for recordings and datasets: what is inside, how big, how fast the data streams.
 
-Bandwidths follow DESIGN §8: a SPAD pixel reads out 1 bit per binary frame (1/bin_s), a conventional frame
+Bandwidths follow docs/methods.md: a SPAD pixel reads out 1 bit per binary frame (1/bin_s), a conventional frame
 ``bit_depth`` bits per pixel per frame, an event 32 bits. Event rates are per pixel of the simulation grid.
 """
 

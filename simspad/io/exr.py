@@ -1,4 +1,4 @@
-"""OpenEXR keyframes of a render directory (DESIGN §5): linear radiance R,G,B (or Y) plus optional depth Z.
+"""OpenEXR keyframes of a render directory (docs/format.md): linear radiance R,G,B (or Y) plus optional depth Z.
 
 Files are written atomically (temporary name, then rename) so an interrupted render never leaves a truncated
 frame. Reading accepts what other renderers write: half or float pixels, ``Y`` or ``R,G,B`` channels, and a

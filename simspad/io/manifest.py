@@ -1,4 +1,4 @@
-"""The dataset manifest (DESIGN §5): ``<dataset>/manifest.json``.
+"""The dataset manifest (docs/format.md): ``<dataset>/manifest.json``.
 
 The manifest is the dataset's table of contents: the spec it was generated from, the spec hash, the seed, and
 for every recording its relative path, size, sha256, status and timings. It is rewritten atomically (temporary

@@ -1,4 +1,4 @@
-"""Render directories (DESIGN §5): ``timeline.json`` plus one OpenEXR file of linear radiance per keyframe.
+"""Render directories (docs/format.md): ``timeline.json`` plus one OpenEXR file of linear radiance per keyframe.
 
 ``timeline.json`` holds ``format`` (:data:`TIMELINE_FORMAT`), ``version`` (:data:`TIMELINE_VERSION`), ``width``
 and ``height`` in pixels, and ``keyframes = [{t (s), file (relative path), camera_to_world (4x4, optional)}]``
@@ -65,7 +65,7 @@ class RenderDirIndex:
 
 # ---------------------------------------------------------------------- reading render directories
 def read_render_dir(render_dir: str | Path) -> RenderDirIndex:
-    """Open and validate a render directory (DESIGN §5).
+    """Open and validate a render directory (docs/format.md).
 
     Checks ``timeline.json`` (format, version, size, keyframe instants and files, optional poses) and every
     frame's EXR header (size, channels). Pixel values (NaN, negative radiance) are checked by

@@ -1,4 +1,4 @@
-"""Fusion methods and baselines (DESIGN §7): read recordings only, output flux frames and their bandwidth.
+"""Fusion methods and baselines (docs/methods.md): read recordings only, output flux frames and their bandwidth.
 
 =====================  ==========================  =========================================================
 name                   label                       what it reads / does (defaults and their source)
@@ -15,7 +15,7 @@ name                   label                       what it reads / does (default
 ``qbp``                QBP (S)                     raw bits: align and merge 1000-bin bursts (:mod:`.qbp`)
 =====================  ==========================  =========================================================
 
-All parameters come from the recording's attrs (DESIGN §5); none is tuned per scene.
+All parameters come from the recording's attrs (docs/format.md); none is tuned per scene.
 """
 
 from simspad.methods.method import Bandwidth, Method, Reconstruction

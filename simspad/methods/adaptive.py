@@ -1,4 +1,4 @@
-"""Adaptive SPAD sampling driven by the AKF covariance (reference paper §"Adaptive SPAD sampling"; DESIGN §7).
+"""Adaptive SPAD sampling driven by the AKF covariance (reference paper §"Adaptive SPAD sampling"; docs/methods.md).
 
 The SPAD aggregates are candidates on the fixed aggregate grid (0.4 kHz by default). At each candidate window
 start the filter's variance P is averaged over square tiles (``tile_px``), and a tile requests the new aggregate

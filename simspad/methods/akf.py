@@ -1,4 +1,4 @@
-"""Asynchronous Kalman filter on log irradiance (Wang, Ng, Scheerlinck, Mahony, ICCV 2021; DESIGN §7).
+"""Asynchronous Kalman filter on log irradiance (Wang, Ng, Scheerlinck, Mahony, ICCV 2021; docs/methods.md).
 
 State per pixel: log irradiance L (ln of ph s⁻¹ m⁻²) and its variance P. Between events the state relaxes to
 the frame value L^F exactly (the solution of L̇ = −K(L − L^F), K = P/R, Ṗ = −P²/R over Δt):

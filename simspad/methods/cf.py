@@ -1,11 +1,11 @@
-"""CF (E): complementary filter on events only (Scheerlinck, Barnes, Mahony, ACCV 2018; DESIGN §7).
+"""CF (E): complementary filter on events only (Scheerlinck, Barnes, Mahony, ACCV 2018; docs/methods.md).
 
 L̇ = e(t) − α(L − L^F) with L^F = 0 (no frames): per event at a pixel, ``L ← β·L ± c`` with
 ``β = exp(−α·Δt)`` since the pixel's last update; at an output instant every pixel decays to that time.
 ``α = 2π·f_cut``; the default cut-off ``f_cut = 0.1 Hz`` (time constant 1.6 s) keeps the high-pass leak far
 slower than motion on the time scales scored here (ms to 1 s), while noise and leak events are forgotten over
 seconds in long recordings. Without frames the initial image is unknown (L = 0): only changes are recovered. The output ``exp(L)`` has
-no absolute scale (scored after an affine log fit, DESIGN §8).
+no absolute scale (scored after an affine log fit, docs/methods.md).
 """
 
 from __future__ import annotations

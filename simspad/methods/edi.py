@@ -1,9 +1,9 @@
-"""EDI (F+E): event double integral deblurring of conventional frames (Pan et al., CVPR 2019; DESIGN §7).
+"""EDI (F+E): event double integral deblurring of conventional frames (Pan et al., CVPR 2019; docs/methods.md).
 
 A frame exposed over [t_s, t_e] records B = (1/T)∫Φ(t)dt (in irradiance units after the EMVA inversion of
 :class:`simspad.methods.spad_response.FrameResponse`). With Φ(t) = Φ(f)·exp(ℓ(t) − ℓ(f)) from events,
 ``Φ(f) = B / ((1/T)∫exp(ℓ(t) − ℓ(f))dt)``. The contrast threshold c is fixed at the sensor's nominal one (the
-recording attrs), not searched: DESIGN §7 fixes c to the nominal threshold for every method.
+recording attrs), not searched: docs/methods.md fixes c to the nominal threshold for every method.
 
 Each output instant takes the frame whose exposure centre is nearest (windows split at mid-points between
 centres) and is propagated from f by events. Var(ln Φ̂) is the EMVA shot + read + quantisation noise.

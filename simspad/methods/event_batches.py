@@ -1,8 +1,8 @@
 """Event stream helpers shared by the event-based methods.
 
-Events are read in time windows from a recording (``rec.events.window(t0_s, t1_s)``, DESIGN §5: ``t`` int64 µs on
+Events are read in time windows from a recording (``rec.events.window(t0_s, t1_s)``, docs/format.md: ``t`` int64 µs on
 the recording's time base, ``p`` 1 ON / 0 OFF) and turned into per-event log-irradiance increments
-``dl = +threshold_on`` (ON) or ``−threshold_off`` (OFF): the nominal contrast thresholds of the sensor (DESIGN §7:
+``dl = +threshold_on`` (ON) or ``−threshold_off`` (OFF): the nominal contrast thresholds of the sensor (docs/methods.md:
 "event contrast threshold c is the sensor's nominal one"). Noise labels are never used (real data has none).
 
 The level of a pixel, ``ℓ(t) = Σ_{events e at the pixel, t_e ≤ t} dl_e``, is the event estimate of

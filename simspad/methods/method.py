@@ -1,10 +1,10 @@
-"""The method interface: what every reconstruction method is and returns (DESIGN §7, docs/internals.md).
+"""The method interface: what every reconstruction method is and returns (docs/methods.md, docs/internals.md).
 
 A :class:`Method` reads a recording (``simspad.io.recording.Recording``) and returns a :class:`Reconstruction`:
 an iterator of ``[H, W]`` float32 photon-irradiance frames (ph s⁻¹ m⁻², the unit of ``/gt/flux``) at the
 requested instants, in order, plus the :class:`Bandwidth` it consumed (valid once iteration has ended).
 
-Bandwidth accounting (DESIGN §8): each sensor read contributes its readout rate per pixel and its bits per pixel
+Bandwidth accounting (docs/methods.md): each sensor read contributes its readout rate per pixel and its bits per pixel
 per second; a method's bandwidth is the sum over the sensors it reads:
 
 - raw SPAD binary frames: 1 bit per bin, at 1/bin_s;

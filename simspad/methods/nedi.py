@@ -1,4 +1,4 @@
-"""NEDI: nonlinear event double integral deblurring of aggregated SPAD frames (DESIGN §7).
+"""NEDI: nonlinear event double integral deblurring of aggregated SPAD frames (docs/methods.md).
 
 For an aggregate of n gated bins at times t_k (gate centres) with S ones, and the latent irradiance
 ``Φ(t) = Φ(f)·exp(ℓ(t) − ℓ(f))`` from events, the expected count is
@@ -8,14 +8,14 @@ For an aggregate of n gated bins at times t_k (gate centres) with S ones, and th
 strictly increasing and concave in Φ(f). ℓ is piecewise constant, so the sum groups the bins by level
 (one segment per event at the pixel). It is solved per pixel by Newton's method inside a bracket
 ``[Φ_ML/max a, Φ_ML/min a]`` (the roots with all a_k at their extremes), bisecting when a step leaves the
-bracket, starting from linear EDI ``Φ_ML/mean a`` (Φ_ML the estimator of §4 on S, n). Linear EDI is biased
+bracket, starting from linear EDI ``Φ_ML/mean a`` (Φ_ML the estimator of docs/sensors.md on S, n). Linear EDI is biased
 when a varies in the window and the response is nonlinear (x = qΦ·gate ≳ 1): the test suite measures it.
 
 The variance of ln Φ̂(f) is the Cramér–Rao bound of the n Bernoulli bins,
-``1 / Σ_k x_k²/(e^{y_k} − 1)``, ``x_k = qΦ(f)a_k·gate``, ``y_k = x_k + r_dark·gate`` (§4's formula when a ≡ 1).
+``1 / Σ_k x_k²/(e^{y_k} − 1)``, ``x_k = qΦ(f)a_k·gate``, ``y_k = x_k + r_dark·gate`` (docs/sensors.md's formula when a ≡ 1).
 
 Default aggregation: 0.4 kHz (n = round(1/(0.4 kHz·bin_s)) = 244 bins at 97.7 kHz), the readout rate of the
-reference paper's Deblur(S) and NEDI+AKF rows (DESIGN §9).
+reference paper's Deblur(S) and NEDI+AKF rows (docs/methods.md).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ DEFAULT_AGGREGATE_HZ = 400.0
 """Aggregate readout rate of the reference paper's Deblur(S) / NEDI+AKF (0.4 kHz per pixel)."""
 
 GATE_AT_BIN_START = True
-"""The gate opens at each bin's ``t_start`` (DESIGN §5 /spad/t_start): a bin samples at ``t_start + gate_s/2``."""
+"""The gate opens at each bin's ``t_start`` (docs/format.md /spad/t_start): a bin samples at ``t_start + gate_s/2``."""
 
 
 class AggregateWindow(NamedTuple):

@@ -1,6 +1,6 @@
-"""NI (S): naive integration of SPAD bits (DESIGN §7).
+"""NI (S): naive integration of SPAD bits (docs/methods.md).
 
-Sum n consecutive binary frames and invert the response with the ML estimator of §4
+Sum n consecutive binary frames and invert the response with the ML estimator of docs/sensors.md
 (``Φ̂ = (−ln(1 − S/n)/gate_s − r_dark)/q``, S = n clamped to n − 1). Each output instant takes the aggregate
 whose window holds it. Default n from the 0.4 kHz aggregate rate of the paper's Deblur(S) row.
 It is NEDI with the events left out: the same aggregation and inversion, no deblurring.

@@ -1,4 +1,4 @@
-"""QBP (S): quanta burst photography (Ma et al., SIGGRAPH 2020; DESIGN §7).
+"""QBP (S): quanta burst photography (Ma et al., SIGGRAPH 2020; docs/methods.md).
 
 For every output instant a burst of raw binary frames centred there is processed:
 

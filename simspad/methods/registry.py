@@ -1,4 +1,4 @@
-"""Method table and dispatcher: every reconstruction method by name (DESIGN §7, docs/internals.md).
+"""Method table and dispatcher: every reconstruction method by name (docs/methods.md, docs/internals.md).
 
 The table starts with the built-in methods in the order of the reference paper; :func:`register` adds more.
 :func:`get_method` builds a method by name, :func:`available_methods` lists the names (all, or those whose

@@ -1,14 +1,14 @@
 """Sensor responses as seen by the methods: SPAD gated binary response and the EMVA 1288 frame response.
 
-Everything is read from a recording's attrs (DESIGN §5), never from the simulator, so the same code inverts
+Everything is read from a recording's attrs (docs/format.md), never from the simulator, so the same code inverts
 real captures converted to the recording layout.
 
-SPAD (DESIGN §4; Ma et al., SIGGRAPH 2020): a bin's bit is 1 with probability
+SPAD (docs/sensors.md; Ma et al., SIGGRAPH 2020): a bin's bit is 1 with probability
 ``p = 1 − exp(−(q·Φ + r_dark)·gate_s)``, with ``q = qe·fill_factor·pixel_pitch_m²`` the detection efficiency per
 unit photon irradiance (m²), so ``q·Φ`` is the detection rate of a pixel. With S ones in n bins the ML estimate
 is ``Φ̂ = (−ln(1 − S/n)/gate_s − r_dark)/q`` (S = n clamped to n − 1 as in the QBP code) and, by the Fisher
 information of n Bernoulli bins, ``Var(ln Φ̂) = (e^y − 1)/(n·x²)`` with ``x = q·Φ·gate_s`` and
-``y = x + r_dark·gate_s`` (the dark-count term; with r_dark = 0 this is DESIGN's ``(eˣ − 1)/(n·x²)``).
+``y = x + r_dark·gate_s`` (the dark-count term; with r_dark = 0 this is docs/sensors.md's ``(eˣ − 1)/(n·x²)``).
 
 Frames (EMVA 1288): electrons ``μ_e = (DN − black)/K``; photon irradiance
 ``Φ = μ_e/(qe·fill_factor·pixel_pitch_m²·exposure_s)``; ``Var(ln Φ̂) = (μ_e + σ_r² + 1/(12K²))/μ_e²``.

@@ -1,4 +1,4 @@
-"""Radiometry (DESIGN §3): relative rendered luminance → lux level → photon irradiance at the sensor plane.
+"""Radiometry (docs/sensors.md): relative rendered luminance → lux level → photon irradiance at the sensor plane.
 
 Chain, for a scene lit by illuminance E (lux) and rendered in relative units Y_rel:
 
@@ -152,7 +152,7 @@ def flux_scale(mean_relative_luminance: float, lux: float, optics: Optics | None
     """Factor from relative rendered luminance to sensor-plane photon irradiance.
 
     ``flux_ph_s_m2 = flux_scale(mean(Y_rel), E) * Y_rel``, with mean(Y_rel) taken on the sequence's first
-    keyframe (DESIGN §3).
+    keyframe (docs/sensors.md).
 
     Parameters
     ----------

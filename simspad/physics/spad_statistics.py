@@ -1,4 +1,4 @@
-"""The gated binary SPAD's response and its maximum-likelihood inverse (DESIGN §4).
+"""The gated binary SPAD's response and its maximum-likelihood inverse (docs/sensors.md).
 
 One place for the formulas that the simulator (``sensors/spad/``) and the methods
 (``methods/spad_response.py``) share; it imports nothing else of SimSPAD, so the methods' wall (they read only
@@ -58,7 +58,7 @@ def estimate_flux(counts, n_bins: int, q_m2: float, gate_s: float, dcr_cps=0.0):
 def log_flux_variance(flux_ph_s_m2, n_bins: int, q_m2: float, gate_s: float, dcr_cps=0.0):
     """Cramér–Rao variance of ``ln Φ̂``: ``(e^y − 1)/(n·x²)``, ``x = q·Φ·gate_s``, ``y = x + r_dark·gate_s``.
 
-    With ``r_dark = 0`` this is DESIGN §4's ``(eˣ − 1)/(n·x²)``; the dark counts add to the detection
+    With ``r_dark = 0`` this is docs/sensors.md's ``(eˣ − 1)/(n·x²)``; the dark counts add to the detection
     probability (y) but carry no signal (x).
     """
     x = q_m2 * np.asarray(flux_ph_s_m2, dtype=np.float64) * gate_s

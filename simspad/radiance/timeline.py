@@ -1,4 +1,4 @@
-"""Radiance in time: a piecewise-linear interpolation between rendered keyframes (DESIGN §1, §5).
+"""Radiance in time: a piecewise-linear interpolation between rendered keyframes (docs/internals.md, docs/format.md).
 
 A :class:`Timeline` holds the keyframe instants and reads keyframes lazily (from the EXR files of a render
 directory, or from arrays for in-memory use) through a small LRU cache, so memory does not grow with the number
@@ -138,7 +138,7 @@ class Timeline:
 
     @classmethod
     def open(cls, render_dir: str | Path, *, cache_frames: int = DEFAULT_CACHE_FRAMES) -> "Timeline":
-        """Open and validate a render directory (DESIGN §5; format in :mod:`simspad.io.render_dir`).
+        """Open and validate a render directory (docs/format.md; format in :mod:`simspad.io.render_dir`).
 
         Checks ``timeline.json`` (format, version, size, keyframe instants and files, optional poses) and every
         frame's EXR header (size, channels). Pixel values (NaN, negative radiance) are checked as each frame is
@@ -191,7 +191,7 @@ class Timeline:
                         render_dir=self.render_dir)
 
     def photon_flux(self, lux: float, optics: Optics | None = None) -> "Timeline":
-        """This timeline in sensor-plane photons s⁻¹ m⁻² at ``lux`` (DESIGN §3: first keyframe's mean sets the level)."""
+        """This timeline in sensor-plane photons s⁻¹ m⁻² at ``lux`` (docs/sensors.md: first keyframe's mean sets the level)."""
         mean = float(np.mean(self.keyframe(0), dtype=np.float64))
         if not mean > 0:
             raise InputError("the first keyframe is black: a lux level cannot be assigned", path=self.render_dir,

@@ -1,4 +1,4 @@
-"""Render linear radiance keyframes of a scene along a trajectory with Mitsuba 3 (DESIGN §1, §5, §6).
+"""Render linear radiance keyframes of a scene along a trajectory with Mitsuba 3 (docs/internals.md, docs/format.md, README.md).
 
 For each instant of the adaptive schedule (:mod:`simspad.render.schedule`, fed by the predicted image motion of
 :mod:`simspad.render.flow`) the camera is posed through ``mi.traverse`` (no recompilation: one

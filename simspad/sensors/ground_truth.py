@@ -1,4 +1,4 @@
-"""Ground truth (DESIGN §4, §5): sharp sensor-plane photon irradiance at requested instants, poses and depth.
+"""Ground truth (docs/sensors.md, docs/format.md): sharp sensor-plane photon irradiance at requested instants, poses and depth.
 
 ``/gt/flux`` holds the *instantaneous* irradiance Φ(t) (no exposure blur) of the piecewise-linear timeline at
 ``/gt/t``; ``/gt/depth`` the depth in metres where the render has it; ``/poses`` the camera-to-world matrices of

@@ -1,7 +1,7 @@
 """Sensor presets: dataclasses carrying the published parameters of the reference paper's cameras.
 
 Every field is overridable from a dataset spec (``[sensors.<kind>]`` table) or the CLI. Field names carry
-units. ``"auto"`` exposure settings are resolved from the first keyframe's flux (DESIGN §4, exposure control).
+units. ``"auto"`` exposure settings are resolved from the first keyframe's flux (docs/sensors.md, exposure control).
 
 Sources: SwissSPAD2 — Ulku et al., IEEE JSTQE 2019; Blackfly S BFS-U3-16S2 (Sony IMX273) — FLIR EMVA 1288
 report; Prophesee Gen4 (Sony IMX636) — Finateu et al., ISSCC 2020 and the reference paper (Muglikar et al.).

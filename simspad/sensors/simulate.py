@@ -1,7 +1,7 @@
-"""Simulate sensors on a render directory and write one recording (DESIGN §1, §5, §6 ``simspad simulate``).
+"""Simulate sensors on a render directory and write one recording (docs/internals.md, docs/format.md, README.md ``simspad simulate``).
 
 Flow: open the render directory as a :class:`~simspad.radiance.timeline.Timeline`; scale it to sensor-plane photon
-irradiance so that the first keyframe's mean luminance corresponds to the lux level (DESIGN §3); run each
+irradiance so that the first keyframe's mean luminance corresponds to the lux level (docs/sensors.md); run each
 requested sensor on ``[start_s, start_s + duration_s]`` with its own random stream
 ``child_rng(seed, *stream_key, kind)``; write the ground truth; all inside one
 :class:`~simspad.io.recording.RecordingWriter`, so a failure anywhere leaves no file behind.
@@ -72,7 +72,7 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     Parameters
     ----------
     render_dir : str or Path
-        Render directory (DESIGN §5).
+        Render directory (docs/format.md).
     out_path : str or Path
         Recording to write (``.h5``); written to a temporary name and renamed when complete.
     settings : RecordingSettings

@@ -1,4 +1,4 @@
-"""Evaluation metrics (DESIGN §8) against hand-computed values; alignment = exact least squares; MTF."""
+"""Evaluation metrics (docs/methods.md) against hand-computed values; alignment = exact least squares; MTF."""
 
 import colour
 import numpy as np

@@ -1,7 +1,7 @@
 """Small real recordings, datasets and submissions for the evaluation tests (issue 8).
 
 Recordings are written with the project's RecordingWriter; SPAD bits are drawn from the gated binary model of
-DESIGN §4 with the SwissSPAD2 preset (simspad.sensors.spad), so the methods see physically consistent data.
+docs/sensors.md with the SwissSPAD2 preset (simspad.sensors.spad), so the methods see physically consistent data.
 """
 
 from __future__ import annotations

@@ -70,7 +70,7 @@ def test_all_methods_end_to_end(moving):
     assert errs["nedi"] < 0.5 * errs["ni"], errs
     assert errs["nedi_akf"] < errs["nedi"], errs
     assert errs["qbp"] < errs["ni"], errs
-    # Bandwidth (DESIGN §8).
+    # Bandwidth (docs/methods.md).
     bin_s = SPAD_ATTRS["bin_s"]
     assert bws["qbp"].readout_khz_per_pixel == pytest.approx(1e-3 / bin_s, rel=1e-6)
     assert bws["qbp"].bits_per_pixel_s == pytest.approx(1.0 / bin_s, rel=1e-6)

@@ -64,7 +64,7 @@ def test_flux_scale_follows_the_lux_convention_and_camera_equation():
 
 
 def test_detection_rate_and_spad_saturation_sanity():
-    # DESIGN §3/§4: with the SwissSPAD2 preset at f/2, mid-grey λ·bin is about 1.8 near 100 lx.
+    # docs/sensors.md: with the SwissSPAD2 preset at f/2, mid-grey λ·bin is about 1.8 near 100 lx.
     flux_mid_grey = rad.flux_scale(1.0, 100.0) * 1.0
     rate = rad.detection_rate(flux_mid_grey, 16.38e-6, 0.105, 0.45)
     assert float(rate) * 10.24e-6 == pytest.approx(1.8, rel=0.25)

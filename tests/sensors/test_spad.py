@@ -1,4 +1,4 @@
-"""SPAD model statistics against analytic values, with confidence bounds (DESIGN §4).
+"""SPAD model statistics against analytic values, with confidence bounds (docs/sensors.md).
 
 Every statistical check uses a bound of ~4–5 standard errors (false-alarm rate ≲ 1e-4 per check) and, where it
 matters, a companion check that a plausible *wrong* model is rejected by the same bound, so the test can fail.
@@ -305,7 +305,7 @@ def test_crosstalk_joint_law_of_neighbours(p_primary):
 # ------------------------------------------------------------------------------------------------- estimator
 @pytest.mark.parametrize("x", [0.05, 0.5, 2.0])
 def test_ml_estimator_recovers_flux_within_predicted_std(x):
-    """z = (ln Φ̂ − ln Φ)/sd has mean 0 and variance 1, sd from the DESIGN §4 formula (dark rate included)."""
+    """z = (ln Φ̂ − ln Φ)/sd has mean 0 and variance 1, sd from the docs/sensors.md formula (dark rate included)."""
     p = SpadParams(gate_s=1e-6, **QUIET)
     q = p.detection_area_m2
     flux = x / (q * p.gate_s)

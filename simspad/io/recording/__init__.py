@@ -1,4 +1,4 @@
-"""The recording file (DESIGN §5): one HDF5 file per sequence × lux.
+"""The recording file (docs/format.md): one HDF5 file per sequence × lux.
 
 Writing goes through :class:`RecordingWriter` (:mod:`.writer`), reading through :func:`open_recording`, which
 returns a :class:`Recording` with one view per group (:mod:`.ground_truth`, :mod:`.spad`, :mod:`.frames`,

@@ -1,4 +1,4 @@
-"""The recording layout (DESIGN §5): format name and version, sensor groups, and what each group must hold.
+"""The recording layout (docs/format.md): format name and version, sensor groups, and what each group must hold.
 
 One HDF5 file per sequence × lux::
 

@@ -1,4 +1,4 @@
-"""Reading a recording (DESIGN §5): :func:`open_recording` validates the file, :class:`Recording` reads it.
+"""Reading a recording (docs/format.md): :func:`open_recording` validates the file, :class:`Recording` reads it.
 
 :func:`open_recording` refuses missing, corrupt or foreign files with one clear message naming the file and the
 field. Methods read recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``,

@@ -1,4 +1,4 @@
-"""Writing a recording (DESIGN §5) atomically, with bytes that depend only on the data.
+"""Writing a recording (docs/format.md) atomically, with bytes that depend only on the data.
 
 :class:`RecordingWriter` writes a temporary sibling and renames it only when the ``with`` block completes, so a
 reader never sees a half-written file. Object modification times are not stored, so identical data and attrs give

@@ -1,4 +1,4 @@
-"""Event camera (DESIGN §4, preset ``prophesee_gen4``): a per-pixel DVS model with exact crossing times.
+"""Event camera (docs/sensors.md, preset ``prophesee_gen4``): a per-pixel DVS model with exact crossing times.
 
 - :mod:`.model` — the model's equations, event labels, fixed pattern (:class:`PixelMaps`), parameter checks;
 - :mod:`.crossing` — threshold crossings of the change detector inside one internal step;

@@ -1,4 +1,4 @@
-"""Event camera model (DESIGN §4, preset ``prophesee_gen4``): a per-pixel DVS with exact crossing times.
+"""Event camera model (docs/sensors.md, preset ``prophesee_gen4``): a per-pixel DVS with exact crossing times.
 
 Per pixel (flattened index ``y·W + x``):
 

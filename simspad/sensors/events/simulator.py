@@ -6,7 +6,7 @@ out after the recording's end are dropped. The pixels of a chunk run in parallel
 whose buffer slice fills up continues from the pixel that did not fit in a larger slice, so no finished work is
 redone.
 
-File layout (DESIGN §5): ``/events/t`` int64 µs since the timeline's t = 0 (``time_origin_s = 0``; the same
+File layout (docs/format.md): ``/events/t`` int64 µs since the timeline's t = 0 (``time_origin_s = 0``; the same
 base as ``/gt/t``), ``x``, ``y`` uint16, ``p`` uint8 (1 ON, 0 OFF), ``label`` uint8, and ``ms_to_idx[k]`` = index
 of the first event with ``t ≥ 1000·k`` µs, for k = 0 … ceil(t_end_ms) (= ceil(duration_ms) + 1 entries when the
 recording starts at 0).
@@ -217,7 +217,7 @@ class _EventsWriter:
 
 def simulate_events(writer, flux_tl, t0: float, t1: float, params: EventParams, rng: np.random.Generator,
                     lux: float, progress: bool = False, chunk_bytes: int = CHUNK_BYTES) -> dict:
-    """Simulate the event camera over [t0, t1] and write ``/events`` (DESIGN §5).
+    """Simulate the event camera over [t0, t1] and write ``/events`` (docs/format.md).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Conventional frame camera (DESIGN §4, preset ``blackfly_s``): the EMVA 1288 linear camera model.
+"""Conventional frame camera (docs/sensors.md, preset ``blackfly_s``): the EMVA 1288 linear camera model.
 
 - :mod:`~simspad.sensors.frames.model`: the per-frame camera model (fixed pattern, EMVA chain, exposure control,
   Bayer mosaic);

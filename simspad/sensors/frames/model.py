@@ -1,4 +1,4 @@
-"""Conventional frame camera model (DESIGN §4, preset ``blackfly_s``): the EMVA 1288 linear camera.
+"""Conventional frame camera model (docs/sensors.md, preset ``blackfly_s``): the EMVA 1288 linear camera.
 
 Chain, per pixel and frame (after the EMVA 1288 reference code ``emva1288/camera/camera.py``)::
 

@@ -1,4 +1,4 @@
-"""Frame camera simulation: exposure windows, the exact exposure integral, and the ``/frames`` writer (DESIGN §5).
+"""Frame camera simulation: exposure windows, the exact exposure integral, and the ``/frames`` writer (docs/format.md).
 
 Exposure windows: frame ``k`` starts at ``t0 + k / frame_rate_hz``. With a rolling shutter row ``r`` starts
 ``r · rolling_shutter_line_s`` later than row 0; ``/frames/t_start`` and ``/frames/t_end`` hold row 0's window.
@@ -105,7 +105,7 @@ def window_fluence(flux_tl, row_start_s: np.ndarray, exposure_s: float, source=N
 
 def simulate_frames(writer, flux_tl, t0: float, t1: float, params: FrameParams, rng: np.random.Generator,
                     progress: bool = False) -> dict:
-    """Simulate the frame camera over [t0, t1] and write ``/frames`` (DESIGN §5).
+    """Simulate the frame camera over [t0, t1] and write ``/frames`` (docs/format.md).
 
     Parameters
     ----------

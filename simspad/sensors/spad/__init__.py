@@ -1,4 +1,4 @@
-"""SPAD sensor (DESIGN §4, preset ``swissspad2``): gated binary frames with calibrated noise.
+"""SPAD sensor (docs/sensors.md, preset ``swissspad2``): gated binary frames with calibrated noise.
 
 - :mod:`~simspad.sensors.spad.model`: the detection model (Λ, dark counts, gate, bins, bit packing, attrs);
 - :mod:`~simspad.sensors.spad.kernel`: the numba sampler (sparse/dense, afterpulsing and crosstalk);

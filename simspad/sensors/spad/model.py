@@ -1,4 +1,4 @@
-"""SPAD sensor model (DESIGN §4, preset ``swissspad2``): gated binary frames with calibrated noise.
+"""SPAD sensor model (docs/sensors.md, preset ``swissspad2``): gated binary frames with calibrated noise.
 
 Model
 -----
@@ -120,7 +120,7 @@ def n_bins(duration_s: float, bin_s: float, gate_s: float) -> int:
 
 
 def pack_bits(bits: np.ndarray) -> np.ndarray:
-    """Pack ``[..., W]`` 0/1 into ``[..., ceil(W/8)]`` uint8, little bit order along W (DESIGN §5)."""
+    """Pack ``[..., W]`` 0/1 into ``[..., ceil(W/8)]`` uint8, little bit order along W (docs/format.md)."""
     return np.packbits(np.asarray(bits, dtype=np.uint8), axis=-1, bitorder="little")
 
 

@@ -1,4 +1,4 @@
-"""SPAD simulation driver: stream packed binary frames chunk by chunk into a recording (DESIGN §5 ``/spad``).
+"""SPAD simulation driver: stream packed binary frames chunk by chunk into a recording (docs/format.md ``/spad``).
 
 The bins of the interval are generated in chunks of about :data:`CHUNK_BYTES` of packed bits, so memory is
 bounded whatever the duration. For each chunk the timeline's linear pieces are laid out as runs of bins
@@ -222,7 +222,7 @@ def chunk_bins(height: int, width: int) -> int:
 
 def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng: np.random.Generator,
                   progress: bool = False) -> dict:
-    """Simulate the SPAD on ``[t0, t1]`` and stream it into ``writer`` (DESIGN §5 ``/spad``).
+    """Simulate the SPAD on ``[t0, t1]`` and stream it into ``writer`` (docs/format.md ``/spad``).
 
     Parameters
     ----------
