@@ -1,4 +1,4 @@
-"""Synthetic recordings for the method tests, written with the lead's RecordingWriter in the docs/format.md layout.
+"""Synthetic recordings for the method tests, written with SimSPAD's RecordingWriter in the docs/format.md layout.
 
 The scene is an analytic flux function ``flux(t) -> [H, W]`` (ph s⁻¹ m⁻²); SPAD bits follow the exact Bernoulli
 model at each gate centre, events are ideal log-threshold crossings with interpolated timestamps on a fine

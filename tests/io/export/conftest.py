@@ -1,4 +1,4 @@
-"""Recordings for the exporter tests: event streams with known content, written with the lead's RecordingWriter.
+"""Recordings for the exporter tests: event streams with known content, written with SimSPAD's RecordingWriter.
 
 ``source`` arrays are kept beside each file, so every round trip compares what an outside reader returns with
 what went in, never with our own reader.
