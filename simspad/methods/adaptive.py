@@ -200,7 +200,7 @@ class AdaptiveNediAkf(NediAkf):
     name = "adaptive_nedi_akf"
     label = "Adaptive NEDI+AKF (S+E)"
     full_name = "NEDI+AKF reading SPAD aggregates only where the filter's variance asks for them"
-    citation = "adaptive SPAD sampling of the SPAD + events fusion paper SimSPAD reproduces (README)"
+    citation = "adaptive SPAD sampling of Muglikar et al., IEEE TPAMI 2025"
 
     def __init__(self, aggregate_hz: float | None = None, n_bins: int | None = None, tile_px: int = 16,
                  ratio: float | None = 1.0, threshold: float | str | None = "auto", integrate: bool = False,

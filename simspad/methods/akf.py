@@ -331,7 +331,7 @@ class NediAkf(Method):
     name = "nedi_akf"
     label = "NEDI+AKF (S+E)"
     full_name = "Nonlinear event double integral of SPAD aggregates, fused with events by an asynchronous Kalman filter"
-    citation = "NEDI: the SPAD + events fusion paper SimSPAD reproduces (README); AKF: Wang et al., ICCV 2021"
+    citation = "NEDI: Muglikar et al., IEEE TPAMI 2025; AKF: Wang et al., ICCV 2021"
     sensors = "S+E"
     requires = ("spad", "events")
     absolute_scale = True

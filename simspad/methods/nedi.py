@@ -337,7 +337,7 @@ class NEDI(Method):
     name = "nedi"
     label = "NEDI (S+E)"
     full_name = "Nonlinear event double integral: SPAD aggregates deblurred by events, without a filter"
-    citation = "the SPAD + events fusion paper SimSPAD reproduces (README)"
+    citation = "Muglikar et al., IEEE TPAMI 2025"
     sensors = "S+E"
     requires = ("spad", "events")
     absolute_scale = True

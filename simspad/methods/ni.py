@@ -17,7 +17,7 @@ class NI(NEDI):
     name = "ni"
     label = "NI (S)"
     full_name = "Naive integration: the maximum-likelihood irradiance of each SPAD aggregate, no deblurring"
-    citation = "baseline of the SPAD + events fusion paper SimSPAD reproduces (README)"
+    citation = "baseline of Muglikar et al., IEEE TPAMI 2025"
     sensors = "S"
     requires = ("spad",)
     use_events = False
