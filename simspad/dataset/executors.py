@@ -30,6 +30,7 @@ from typing import Any
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
+from simspad.io.worker_signals import ignore_sigint, sigint_blocked
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.renderer import render_sequence
 from simspad.render.settings import RenderSettings
@@ -141,7 +142,7 @@ def _die_with_parent() -> None:
         libc.prctl(pr_set_pdeathsig, signal.SIGKILL)
         if os.getppid() == 1:  # the parent already died before prctl took effect
             os._exit(1)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the driver, which shuts the pool down
+    ignore_sigint()  # Ctrl-C is handled by the driver, which shuts the pool down
 
 
 #: Per-keyframe render work (megapixels × samples per pixel) below which a render is "small": its time goes
@@ -176,10 +177,12 @@ class LocalExecutor:
         return f"local: {renders}, {self.workers} simulation process(es)"
 
     def submit_render(self, task):
-        return self._render_pool.submit(run_render, task, self.out_dir, self.env)
+        with sigint_blocked():  # a worker spawned here starts deaf to Ctrl-C (no traceback from its imports)
+            return self._render_pool.submit(run_render, task, self.out_dir, self.env)
 
     def submit_simulation(self, task):
-        return self._sim_pool.submit(run_simulation, task, self.out_dir, self.env)
+        with sigint_blocked():
+            return self._sim_pool.submit(run_simulation, task, self.out_dir, self.env)
 
     def sim_slots(self, renders_running: int) -> int:
         # A large render owns the machine; small renders each hold one process slot.
