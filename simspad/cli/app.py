@@ -16,6 +16,7 @@ import click
 
 from simspad import __version__, defaults
 from simspad.cli.interrupt import first_sigint_only
+from simspad.cli.library_noise import quiet_library_warnings
 from simspad.errors import SimSpadError
 from simspad.io.export import FORMATS as EXPORT_FORMATS
 from simspad.io.export import FRAME_FORMATS as EXPORT_FRAME_FORMATS
@@ -48,6 +49,7 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
     """SimSPAD: physically rendered SPAD, frame and event datasets for low-light, high-speed imaging."""
     global _DEBUG
     _DEBUG = debug
+    quiet_library_warnings(debug)  # numpy/matplotlib/resource-tracker warnings are not for the user
     if allow_python_scenes:
         os.environ["SIMSPAD_ALLOW_PYTHON_SCENES"] = "1"  # inherited by render and simulation workers
     from simspad.io.provenance import source_date_epoch  # deferred: `simspad --help` stays 0.25 s

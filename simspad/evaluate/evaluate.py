@@ -64,7 +64,7 @@ from simspad.io.results_dir import (
     write_images,
     write_results_dir,
 )
-from simspad.io.worker_signals import ignore_sigint, kill_pool_workers, sigint_blocked
+from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, get_method
 
 MAX_WORKERS = 2
@@ -212,7 +212,7 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
                 done(i, run_recording(b))
         else:
             pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                       initializer=ignore_sigint)
+                                       initializer=die_with_parent_and_ignore_sigint)
             try:
                 with sigint_blocked():  # workers start deaf to Ctrl-C: the driver alone reports it
                     futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}

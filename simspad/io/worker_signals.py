@@ -11,6 +11,8 @@ initializer on (:func:`ignore_sigint`). The driver alone turns Ctrl-C into one l
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import os
 import signal
 import threading
 from typing import Iterator
@@ -38,6 +40,17 @@ def ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def die_with_parent_and_ignore_sigint() -> None:
+    """Worker initializer: on Linux the kernel SIGKILLs this worker when its driver dies (even by kill -9), so
+    no orphan keeps computing (and holding the driver's stderr) after a crash; Ctrl-C is the driver's."""
+    with contextlib.suppress(Exception):
+        pr_set_pdeathsig = 1
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL)
+        if os.getppid() == 1:  # the driver already died before prctl took effect
+            os._exit(1)
+    ignore_sigint()
 
 
 def kill_pool_workers(pool) -> None:
