@@ -14,7 +14,12 @@ import ctypes
 import os
 import sys
 import tempfile
+import threading
 from typing import Iterator
+
+
+#: File descriptors 1 and 2 are process-wide: one capture at a time (a Dask worker may run tasks in threads).
+_CAPTURE_LOCK = threading.Lock()
 
 
 class NativeOutput:
@@ -44,6 +49,13 @@ def captured_native_output() -> Iterator[NativeOutput]:
     Python-level output of the block is captured as well (it is flushed first). Where the descriptors cannot be
     duplicated (no stdout at all), the block runs uncaptured.
     """
+    with _CAPTURE_LOCK:
+        with _capture() as captured:
+            yield captured
+
+
+@contextlib.contextmanager
+def _capture() -> Iterator[NativeOutput]:
     captured = NativeOutput()
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
