@@ -15,6 +15,8 @@ from pathlib import Path
 import click
 
 from simspad import __version__, defaults
+from simspad.cli.interrupt import first_sigint_only
+from simspad.cli.library_noise import quiet_library_warnings
 from simspad.errors import SimSpadError
 from simspad.io.export import FORMATS as EXPORT_FORMATS
 from simspad.io.export import FRAME_FORMATS as EXPORT_FRAME_FORMATS
@@ -47,6 +49,7 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
     """SimSPAD: physically rendered SPAD, frame and event datasets for low-light, high-speed imaging."""
     global _DEBUG
     _DEBUG = debug
+    quiet_library_warnings(debug)  # numpy/matplotlib/resource-tracker warnings are not for the user
     if allow_python_scenes:
         os.environ["SIMSPAD_ALLOW_PYTHON_SCENES"] = "1"  # inherited by render and simulation workers
     from simspad.io.provenance import source_date_epoch  # deferred: `simspad --help` stays 0.25 s
@@ -215,7 +218,8 @@ def export(recording, fmt, out_path, packing, frames_format):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit."""
-    code = _main(argv)
+    with first_sigint_only():  # a second Ctrl-C must not break into the clean-up of the first
+        code = _main(argv)
     writer = sys.modules.get("simspad.io.recording.writer")
     if writer is not None and writer.hdf5_close_failed():
         # A close failed on a full disk: HDF5 would crash retrying it at exit (SIGSEGV); the temporary file is
@@ -247,8 +251,10 @@ def _main(argv: list[str] | None) -> int:
             raise
         click.echo(f"simspad: error: {exc.format()}", err=True)
         return exc.exit_code
-    except click.exceptions.Abort:
-        click.echo("simspad: aborted", err=True)
+    except click.exceptions.Abort as exc:
+        # click turns Ctrl-C (KeyboardInterrupt) into Abort; a declined prompt is an Abort of its own
+        interrupted = isinstance(exc.__cause__, KeyboardInterrupt)
+        click.echo(f"simspad: {'interrupted' if interrupted else 'aborted'}", err=True)
         return 130
     except click.ClickException as exc:
         exc.show()

@@ -32,6 +32,7 @@ from simspad.dataset.fault_injection import maybe_inject_fault
 from simspad.dataset.speed import sequence_trajectories
 from simspad.errors import SimSpadError
 from simspad.io.hashing import file_sha256
+from simspad.io.worker_signals import ignore_sigint, sigint_blocked
 from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
@@ -216,7 +217,7 @@ def _die_with_parent() -> None:
         libc.prctl(pr_set_pdeathsig, signal.SIGKILL)
         if os.getppid() == 1:  # the parent already died before prctl took effect
             os._exit(1)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the driver, which shuts the pool down
+    ignore_sigint()  # Ctrl-C is handled by the driver, which shuts the pool down
 
 
 class LocalExecutor:
@@ -258,14 +259,17 @@ class LocalExecutor:
         return self.workers
 
     def submit_render_plan(self, task):
-        return self._pool("render").submit(run_render_plan, task, self.out_dir, self.env)
+        with sigint_blocked():  # a worker spawned here starts deaf to Ctrl-C (no traceback from its imports)
+            return self._pool("render").submit(run_render_plan, task, self.out_dir, self.env)
 
     def submit_render_chunk(self, task, plan: dict, indices: list[int]):
-        return self._pool("render").submit(run_render_chunk, task, plan, indices, self.out_dir, self.env,
-                                           self.render_threads)
+        with sigint_blocked():
+            return self._pool("render").submit(run_render_chunk, task, plan, indices, self.out_dir, self.env,
+                                               self.render_threads)
 
     def submit_simulation(self, task):
-        return self._pool("sim").submit(run_simulation, task, self.out_dir, self.env)
+        with sigint_blocked():
+            return self._pool("sim").submit(run_simulation, task, self.out_dir, self.env)
 
     @staticmethod
     def wait(futures):

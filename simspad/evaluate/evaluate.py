@@ -64,6 +64,7 @@ from simspad.io.results_dir import (
     write_images,
     write_results_dir,
 )
+from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, get_method
 
 MAX_WORKERS = 2
@@ -210,10 +211,17 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
             for i, b in enumerate(batches):
                 done(i, run_recording(b))
         else:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-                futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                       initializer=die_with_parent_and_ignore_sigint)
+            try:
+                with sigint_blocked():  # workers start deaf to Ctrl-C: the driver alone reports it
+                    futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
                 for fut in as_completed(futures):
                     done(futures[fut], fut.result())
+            except BaseException:
+                kill_pool_workers(pool)  # interrupted or failed: do not wait for the other recordings
+                raise
+            pool.shutdown()
     return [r for out in results for r in out]
 
 

@@ -108,6 +108,8 @@ def fill_entry(entry: RecordingEntry) -> RecordingEntry:
         if not rec.has("gt"):
             raise SimSpadError("recording has no ground truth (/gt): nothing to score against", path=entry.path,
                                field="/gt")
+        if rec.has("events"):
+            rec.events.check_time_order()  # methods find event windows by binary search on the timestamps
         entry.sequence = str(rec.attrs.get("sequence") or entry.extra.get("sequence") or rec.scene
                              or Path(entry.rel).stem)
         entry.scene = str(rec.scene or entry.extra.get("scene") or entry.sequence)

@@ -7,6 +7,7 @@ depth channel named ``Z`` (or ``depth.Z`` / ``depth.Y`` / ``depth.T`` as written
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import OpenEXR
 
 from simspad.errors import InputError
 from simspad.io.atomic import atomic_path
+from simspad.io.native_output import NativeOutput, captured_native_output
 
 RGB_CHANNELS = ("R", "G", "B")
 LUMINANCE_CHANNEL = "Y"
@@ -80,16 +82,28 @@ def _classify(path: Path, names: tuple[str, ...]) -> tuple[str, str | None]:
     return radiance, depth
 
 
+def _unreadable(path: Path, exc: Exception, native: NativeOutput) -> str:
+    """One line for an EXR the library refused: its own diagnostic (the cause) when it printed one."""
+    cause = native.first_line("EXR_ERR") or native.first_line()
+    cause = cause.removeprefix(f"{path}: ").strip() or str(exc)
+    cause = re.sub(r"^\((EXR_ERR_\w+)\)\s*", r"\1: ", cause)  # "(EXR_ERR_X) text" → "EXR_ERR_X: text"
+    return f"not a readable OpenEXR file ({cause})"
+
+
 def read_exr_info(path: str | Path) -> ExrInfo:
     """Read an EXR header only. Raises :class:`InputError` if the file is missing or not an EXR."""
     path = Path(path)
     if not path.is_file():
         raise InputError("keyframe file is missing", path=path, field="file")
-    try:
-        f = OpenEXR.File(str(path), separate_channels=True, header_only=True)
-        header = f.header()
-    except Exception as exc:  # OpenEXR raises plain RuntimeError for corrupt or foreign files
-        raise InputError(f"not a readable OpenEXR file ({exc})", path=path, field="file") from None
+    error = None
+    with captured_native_output() as native:  # the library prints its diagnostics itself (stdout included)
+        try:
+            f = OpenEXR.File(str(path), separate_channels=True, header_only=True)
+            header = f.header()
+        except Exception as exc:  # OpenEXR raises plain RuntimeError for corrupt or foreign files
+            error = exc
+    if error is not None:
+        raise InputError(_unreadable(path, error, native), path=path, field="file") from None
     (x0, y0), (x1, y1) = (np.asarray(v) for v in header["dataWindow"])
     names = tuple(sorted(ch.name for ch in header["channels"]))
     radiance, depth = _classify(path, names)
@@ -108,11 +122,15 @@ def read_exr(path: str | Path) -> dict[str, np.ndarray]:
         [H, W] per-pixel object id if the file has :data:`OBJECT_ID_CHANNEL`.
     """
     path = Path(path)
-    try:
-        f = OpenEXR.File(str(path), separate_channels=True)
-        channels = {name: ch.pixels for name, ch in f.channels().items()}
-    except Exception as exc:
-        raise InputError(f"not a readable OpenEXR file ({exc})", path=path, field="file") from None
+    error = None
+    with captured_native_output() as native:
+        try:
+            f = OpenEXR.File(str(path), separate_channels=True)
+            channels = {name: ch.pixels for name, ch in f.channels().items()}
+        except Exception as exc:
+            error = exc
+    if error is not None:
+        raise InputError(_unreadable(path, error, native), path=path, field="file") from None
     radiance, depth = _classify(path, tuple(channels))
     out: dict[str, np.ndarray] = {}
     if radiance == "rgb":

@@ -44,6 +44,9 @@ def trajectory_set_from_document(doc: dict, source: str) -> TrajectorySet:
     if not isinstance(objs, dict):
         raise InputError("must be a table of object tables ([objects.<id>])", path=source, field="objects")
     for name, table in objs.items():
+        if not name.strip():  # TOML allows [objects.""]; no shape has an empty id
+            raise InputError("an object with an empty id (expected [objects.<shape id>])", path=source,
+                             field="objects")
         objects[name] = _body_from_table(table, f"objects.{name}", source)
     offset = doc.get("time_offset_s", 0.0)
     if not isinstance(offset, (int, float)) or isinstance(offset, bool) or not math.isfinite(offset):

@@ -12,6 +12,7 @@ and a variant must be chosen first (:func:`simspad.render.mitsuba_env.select_var
 
 from __future__ import annotations
 
+import re
 import sys
 
 import numpy as np
@@ -67,6 +68,30 @@ def load_canonical(mi, source, where):
     return scene
 
 
+#: The source location Mitsuba prefixes to each line of its messages ("[parser.cpp:451] ").
+_MITSUBA_SOURCE_TAG = re.compile(r"^\[[\w.]+:\d+\]\s*")
+
+
+def mitsuba_error_text(exc: BaseException) -> str:
+    """Mitsuba's message as one line, its cause included.
+
+    A nested error (an ``<include>`` of a missing file) is reported over several lines, outermost first: "Error
+    while loading scene.xml (line 2, col 4): while processing <include>:" then the cause; every line is kept
+    (joined by a space), without the C++ source locations and without repeating the file/line context.
+    """
+    parts, seen_context = [], set()
+    for line in str(exc).splitlines():
+        line = _MITSUBA_SOURCE_TAG.sub("", line.strip())
+        context, sep, rest = line.partition("): ")
+        if sep and context.startswith("Error while loading"):
+            if context in seen_context:
+                line = rest
+            seen_context.add(context)
+        if line:
+            parts.append(line)
+    return " ".join(parts) or type(exc).__name__
+
+
 class MitsubaScene:
     """A loaded scene, our own sensor, and the parameters that move the camera and the objects."""
 
@@ -79,7 +104,7 @@ class MitsubaScene:
         try:
             self.scene = load_canonical(mi, source, where)
         except Exception as exc:  # Mitsuba reports malformed scenes as RuntimeError with its own message
-            raise SimSpadError(f"Mitsuba cannot load the scene: {str(exc).splitlines()[0]}", path=where,
+            raise SimSpadError(f"Mitsuba cannot load the scene: {mitsuba_error_text(exc)}", path=where,
                                field="scene") from None
         sensors = {s.id(): s for s in self.scene.sensors()}
         camera = sensors.get(info.camera_id)

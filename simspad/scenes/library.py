@@ -215,6 +215,10 @@ def _meta_fields(meta: dict, toml_path: Path, base: Path) -> dict:
         objs = meta["objects"]
         if not isinstance(objs, list) or not all(isinstance(o, str) for o in objs):
             raise SimSpadError("expected a list of shape ids (strings)", path=toml_path, field="objects")
+        for i, o in enumerate(objs):
+            if not o.strip():  # an empty id matches no shape (Mitsuba gives unnamed shapes generated ids)
+                raise SimSpadError(f"entry {i} is an empty shape id (expected the id of a shape in the scene)",
+                                   path=toml_path, field="objects")
         out["objects"] = tuple(objs)
     return out
 
@@ -258,6 +262,10 @@ def _first_perspective_sensor_id(xml_path: Path) -> str:
         raise SimSpadError(f"malformed XML: {exc}", path=xml_path) from None
     if root.tag != "scene":
         raise SimSpadError(f"root element is <{root.tag}>, expected <scene>", path=xml_path, field="scene")
+    for element in root.iter():
+        if element.get("id") is not None and not element.get("id").strip():
+            raise SimSpadError(f"<{element.tag} type=\"{element.get('type', '')}\"> has an empty id (give it a "
+                               "name, or leave the id attribute out)", path=xml_path, field=f"{element.tag}.id")
     for sensor in root.iter("sensor"):
         if sensor.get("type") in _PERSPECTIVE_TYPES:
             return sensor.get("id") or DEFAULT_CAMERA_ID

@@ -68,7 +68,10 @@ def plot_psnr_vs_lux(board: Board) -> bytes:
     ax.set_ylabel("PSNR (dB), mean over scenes")
     ax.set_title("PSNR versus light level")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    else:  # every method failed (no finite PSNR): say so instead of an empty legend
+        ax.text(0.5, 0.5, "no method has a finite PSNR", transform=ax.transAxes, ha="center", va="center")
     return figure_png(fig)
 
 

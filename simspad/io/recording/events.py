@@ -10,6 +10,7 @@ from typing import Iterator
 
 import numpy as np
 
+from simspad.errors import InputError
 from simspad.io.recording.group import GroupView
 from simspad.io.recording.samples import EventWindows
 
@@ -57,6 +58,36 @@ class EventsView(GroupView):
         """Index range of events with ``t0_s ≤ t < t1_s``."""
         return self.first_index_at(t0_s), self.first_index_at(t1_s)
 
+    def check_time_order(self, chunk: int = CHUNK_EVENTS) -> None:
+        """Refuse a stream whose timestamps decrease anywhere (windows are found by binary search on ``t``).
+
+        Reads ``/events/t`` ``chunk`` events at a time (memory does not grow with the recording).
+
+        Raises
+        ------
+        InputError
+            Naming ``/events/t`` and the first index where the time goes back.
+        """
+        previous = None
+        for i in range(0, self.n_events, chunk):
+            t = self._h5["events/t"][i:i + chunk]
+            self._check_order(t, i, previous)
+            previous = int(t[-1])
+
+    def _check_order(self, t: np.ndarray, i0: int, previous: int | None) -> None:
+        """InputError at the first event of ``t`` (starting at index ``i0``) earlier than the one before it."""
+        if t.size == 0:
+            return
+        back = np.flatnonzero(np.diff(t) < 0)
+        if previous is not None and t[0] < previous:
+            k, before = 0, previous
+        elif back.size:
+            k, before = int(back[0]) + 1, int(t[back[0]])
+        else:
+            return
+        raise InputError(f"not sorted (event {i0 + k} at {int(t[k])} µs comes after one at {before} µs)",
+                         path=self._path, field="/events/t")
+
     def by_index(self, i0: int, i1: int) -> dict[str, np.ndarray]:
         """Events ``i0:i1`` as a dict of arrays (``label`` zeros when the recording has none)."""
         g = self._h5["events"]
@@ -74,8 +105,12 @@ class EventsView(GroupView):
         """Yield events in time order, ``chunk`` at a time, optionally restricted to ``[t0_s, t1_s)``."""
         i0 = 0 if t0_s is None else self.first_index_at(t0_s)
         i1 = self.n_events if t1_s is None else self.first_index_at(t1_s)
+        previous = None
         for i in range(i0, i1, chunk):
-            yield self.by_index(i, min(i + chunk, i1))
+            events = self.by_index(i, min(i + chunk, i1))
+            self._check_order(events["t"], i, previous)  # streaming readers see a disorder where it is
+            previous = int(events["t"][-1]) if events["t"].size else previous
+            yield events
 
     def windows(self, window_s: float, t0_s: float | None = None, t1_s: float | None = None) -> EventWindows:
         """Fixed-length windows over ``[t0_s, t1_s)`` (default: the recorded span) as a lazy sequence of

@@ -1,0 +1,55 @@
+"""Ctrl-C pressed twice during `generate` or `evaluate`: one line, exit 130, no traceback (issue 14, low).
+
+A terminal sends SIGINT to the whole foreground process group: the driver and its pool workers. Before, workers
+still importing numpy/scipy printed their own tracebacks, and the second press broke into the driver's clean-up.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+
+def _workers_started(pid: int) -> bool:
+    try:
+        return bool(Path(f"/proc/{pid}/task/{pid}/children").read_text().split())
+    except OSError:
+        return False
+
+
+def _press_ctrl_c_twice(simspad_cli, *args, gap_s: float) -> subprocess.CompletedProcess:
+    proc = subprocess.Popen(simspad_cli.command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=simspad_cli.env, start_new_session=True)  # its own group, as in a terminal
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and not _workers_started(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)  # workers spawned, some still importing: where a Ctrl-C used to print their tracebacks
+    assert proc.poll() is None, "the command ended before it could be interrupted"
+    os.killpg(proc.pid, signal.SIGINT)
+    time.sleep(gap_s)
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+    except ProcessLookupError:  # the whole group already exited: a second press cannot land anywhere
+        pass
+    out, err = proc.communicate(timeout=120)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out.decode(), err.decode())
+
+
+@pytest.mark.parametrize("gap_s", [0.05, 0.5])
+@pytest.mark.parametrize("command", ["generate", "evaluate"])
+def test_double_ctrl_c_is_one_line(command, gap_s, tmp_path, simspad_cli, evaluation_dataset):
+    if command == "generate":
+        args = ("generate", "mini", "--out", tmp_path / "mini", "--workers", 2)
+    else:
+        args = ("evaluate", evaluation_dataset, "--out", tmp_path / "res")
+    proc = _press_ctrl_c_twice(simspad_cli, *args, gap_s=gap_s)
+    lines = [ln for ln in proc.stderr.replace("\r", "\n").splitlines() if ln.strip()]
+    assert proc.returncode == 130, proc.stderr[-3000:]
+    assert lines[-1] == "simspad: interrupted", proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr and "Error" not in proc.stderr, proc.stderr[-3000:]
+    assert "resource_tracker" not in proc.stderr and "leaked" not in proc.stderr, proc.stderr[-3000:]
