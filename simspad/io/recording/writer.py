@@ -159,7 +159,11 @@ class RecordingWriter:
         _install_quiet_dealloc_hook()
         self.tmp_path = temporary_sibling(self.path)
         try:
-            self.h5 = h5py.File(self.tmp_path, "w", libver=_LIBVER)
+            # No chunk cache: HDF5 then allocates each chunk's file space when it is written, in write order. With
+            # the default 1 MiB cache a chunk is placed when it is evicted or its dataset closed, which depends on
+            # object lifetimes in the process, so the same data could get a different byte layout on a Dask worker
+            # than in a local pool worker. (The writers write whole chunks, so the cache saved nothing.)
+            self.h5 = h5py.File(self.tmp_path, "w", libver=_LIBVER, rdcc_nbytes=0)
             self.set_attrs("/", format=FORMAT, format_version=FORMAT_VERSION, **self.attrs)
         except BaseException as exc:
             self._discard()
