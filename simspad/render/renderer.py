@@ -222,7 +222,9 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     if bad:
         raise SimSpadError(f"keyframe index {bad[0]} outside the plan's 0..{plan.n_keyframes - 1}", field="indices")
     make_out_dir(out_dir)
-    todo = [i for i in indices if not ((out_dir / plan.names[i]).is_file() and frame_is_intact(out_dir / plan.names[i]))]
+    # A cached keyframe is decoded once here: a damaged one is rendered again, not re-used.
+    paths = {i: out_dir / plan.names[i] for i in indices}
+    todo = {i for i, path in paths.items() if not path.is_file() or not frame_is_intact(path)}
     if todo and loaded is None:
         loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
     if loaded is not None:
@@ -230,7 +232,7 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     counter = loaded.counter if loaded is not None else None
     if counter is not None:
         counter.take()  # kernels of loading and depth probes belong to no frame
-    frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), out_dir / plan.names[i]) for i in indices]
+    frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), paths[i], i in todo) for i in indices]
     return _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
 
 
@@ -323,7 +325,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     finalize_render(plan, out_dir)
     schedule = plan.timeline["schedule"]
     return RenderSummary(out_dir=out_dir, n_keyframes=plan.n_keyframes, n_rendered=len(done.frame_times_s),
-                         n_reused=done.n_reused, duration_s=float(settings.duration_s), start_s=plan.timeline["start_s"],
+                         n_reused=done.n_reused, duration_s=float(settings.duration_s),
+                         start_s=plan.timeline["start_s"],
                          n_spad_bins=schedule.get("n_spad_bins"), render_s=done.render_s, variant=plan.variant,
                          compiled_first_frame=done.compiled[0] if done.compiled else -1,
                          compiled_after_first=sum(done.compiled[1:]) if loaded.counter.enabled else -1,
@@ -363,13 +366,14 @@ class RenderedFrames(NamedTuple):
 
 def _render_frames(loaded: LoadedScene | None, frames: list, seed: int, counter: CompileCounter | None,
                    progress: bool, on_frame=None) -> RenderedFrames:
-    """Render and write every ``(index, t, camera_to_world, path)`` of ``frames`` whose file is not there yet."""
+    """Render and write every ``(index, t, camera_to_world, path, needed)`` of ``frames`` that is ``needed`` (its
+    file is missing or damaged); count the others as re-used."""
     frame_times, compiled, n_reused = [], [], 0
     bar = _progress(len(frames), progress)
     t_render = time.perf_counter()
     try:
-        for i, t, camera_to_world, path in frames:
-            if path.is_file() and frame_is_intact(path):  # a damaged cached frame is rendered again
+        for i, t, camera_to_world, path, needed in frames:
+            if not needed:
                 n_reused += 1
             else:
                 tic = time.perf_counter()

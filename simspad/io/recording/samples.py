@@ -14,6 +14,7 @@ int8 with **+1 ON / −1 OFF**): the layout tonic's transforms expect. The file 
 
 from __future__ import annotations
 
+from abc import abstractmethod
 import math
 from collections.abc import Sequence
 
@@ -52,8 +53,9 @@ class _Lazy(Sequence):
             raise IndexError(f"index {i} out of range for {self._n} items")
         return self._item(i)
 
+    @abstractmethod
     def _item(self, i: int):
-        raise NotImplementedError
+        """Item ``i`` (0 ≤ i < len): each subclass says what it reads."""
 
 
 class EventWindows(_Lazy):
