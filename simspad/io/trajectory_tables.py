@@ -212,6 +212,9 @@ def _gen_shake(table, where, source):
     return handheld_shake(p, q, seed=seed, tremor=tremor,
                           duration_s=_number(table, "duration_s", where, source, 1.0, positive=True),
                           rate_hz=_number(table, "rate_hz", where, source, 0.0, non_negative=True) or None,
+                          yaw_rate_deg_s=_number(table, "yaw_rate_deg_s", where, source, 0.0),
+                          start_yaw_deg=_number(table, "start_yaw_deg", where, source, 0.0),
+                          axis=_vector(table, "axis", 3, where, source, (0.0, 1.0, 0.0)),
                           source=f"{source}:{where}")
 
 
@@ -232,7 +235,8 @@ GENERATORS: dict[str, tuple[Callable, set[str]]] = {
     "orbit": (_gen_orbit, {"target", "radius_m", "angular_speed_deg_s", "height_m", "start_angle_deg", "up",
                            "duration_s", "rate_hz"}),
     "handheld_shake": (_gen_shake, _POSE_KEYS | {"seed", "f_lo_hz", "f_hi_hz", "translation_amplitude_m",
-                                                  "rotation_amplitude_deg", "duration_s", "rate_hz"}),
+                                                  "rotation_amplitude_deg", "duration_s", "rate_hz", "yaw_rate_deg_s",
+                                                  "start_yaw_deg", "axis"}),
     "object_rotation": (_gen_object_rotation, {"center", "axis", "rpm", "start_angle_deg", "duration_s", "rate_hz"}),
 }
 """Generator name → (builder from a table, accepted parameter names)."""

@@ -95,21 +95,28 @@ class Tremor:
 
 def handheld_shake(position_m=(0.0, 0.0, 0.0), quaternion_xyzw=(0.0, 0.0, 0.0, 1.0), *, seed: int = 0,
                    tremor: Tremor = Tremor(), duration_s: float = 1.0, rate_hz: float | None = None,
+                   yaw_rate_deg_s: float = 0.0, start_yaw_deg: float = 0.0, axis=(0.0, 1.0, 0.0),
                    source: str = "handheld_shake") -> Trajectory:
-    """Hand tremor around a base pose: seeded band-limited noise.
+    """Hand tremor around a base pose, optionally panning: seeded band-limited noise.
 
     Each translation axis (world) and each rotation axis (body frame, small-angle rotation vector) is a sum of
     ``tremor.n_components`` sinusoids with frequencies drawn uniformly in ``[tremor.f_lo_hz, tremor.f_hi_hz]``,
     random phases and Rayleigh-distributed weights, scaled so that the per-axis RMS (over an infinite time)
     equals ``tremor.translation_amplitude_m`` (m) and ``tremor.rotation_amplitude_deg`` (deg). Deterministic
     for a given ``seed``.
+
+    A hand-held pan: with ``yaw_rate_deg_s`` (deg/s) or ``start_yaw_deg`` (deg) the base pose turns about the
+    world ``axis`` through the camera, by ``start_yaw_deg + yaw_rate_deg_s·t`` (right-handed; a pan to the left
+    about the up vector for positive rates), and the tremor rides on the turning pose. Without them the pose is
+    the base pose plus tremor, as before.
     """
     f_lo_hz, f_hi_hz, n_components = tremor.f_lo_hz, tremor.f_hi_hz, tremor.n_components
     if not 0 < f_lo_hz <= f_hi_hz:
         raise ValueError(f"handheld_shake: expected 0 < f_lo_hz ≤ f_hi_hz, got {f_lo_hz}, {f_hi_hz}")
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5A4E]))
-    # 20 keyframes per period of the highest frequency: spline error ~ (2π/20)^4/384 ≈ 3e-5 of the amplitude.
-    rate = max(rate_hz or 0.0, 20.0 * f_hi_hz)
+    # 20 keyframes per period of the highest frequency: spline error ~ (2π/20)^4/384 ≈ 3e-5 of the amplitude;
+    # a pan keeps ≥ 8 keyframes per 45° as linear_pan does.
+    rate = max(rate_hz or 0.0, 20.0 * f_hi_hz, 8 * abs(yaw_rate_deg_s) / 45.0)
     n = _frame_count(duration_s, rate)
     t = np.linspace(0.0, duration_s, n)
 
@@ -124,7 +131,12 @@ def handheld_shake(position_m=(0.0, 0.0, 0.0), quaternion_xyzw=(0.0, 0.0, 0.0, 1
     dp = band_noise(tremor.translation_amplitude_m)
     dr = band_noise(np.deg2rad(tremor.rotation_amplitude_deg))
     p = np.asarray(position_m, dtype=np.float64) + dp
-    q = (Rotation.from_quat(quaternion_xyzw) * Rotation.from_rotvec(dr)).as_quat()
+    base = Rotation.from_quat(quaternion_xyzw)
+    if yaw_rate_deg_s != 0.0 or start_yaw_deg != 0.0:
+        # Only when asked: composing with an identity turn would still round the quaternion of a plain shake.
+        yaw_deg = start_yaw_deg + yaw_rate_deg_s * t
+        base = Rotation.from_rotvec(np.deg2rad(yaw_deg)[:, None] * _unit(axis)) * base
+    q = (base * Rotation.from_rotvec(dr)).as_quat()
     return Trajectory(t, p, q, source=source)
 
 
