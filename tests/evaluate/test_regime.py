@@ -160,3 +160,15 @@ def test_evaluate_reads_the_speed_attributes_of_each_recording(evaluation_datase
         f.attrs["speed_factor"] = "fast"
     assert main(["evaluate", str(fast), "--methods", "ni", "--out", str(tmp_path / "bad")]) == 2
     assert not (tmp_path / "bad").exists()
+
+
+def test_scene_tables_keep_each_speed_in_its_own_column(tmp_path):
+    d = results_dir(tmp_path / "res", rows_for(["akf_fe"]))
+    board = build_board([d])
+    assert sorted({s for s, _ in board.columns}) == ["fan", "fan ×8", "office", "office ×8"]
+    # Each cell is one recording's PSNR, not the mean of a scene's slow and fast recordings.
+    assert board.psnr[("akf_fe", "office", 100.0)] == pytest.approx(psnr_model("akf_fe", 100.0, 1.0))
+    assert board.psnr[("akf_fe", "office ×8", 100.0)] == pytest.approx(psnr_model("akf_fe", 100.0, 8.0))
+    assert main(["leaderboard", str(d), "--out", str(tmp_path / "lb")]) == 0
+    md = (tmp_path / "lb" / "leaderboard.md").read_text(encoding="utf-8")
+    assert "| office | office ×8 |" in md

@@ -29,7 +29,9 @@ DAGGER = "†"
 
 @dataclass
 class Board:
-    """The merged results: rows, methods (in ranking order), (scene, lux) columns and per-method info."""
+    """The merged results: rows, methods (in ranking order), (scene, lux) columns and per-method info.
+
+    Scene columns carry the speed (:func:`scene_column`): ``fan`` and ``fan ×16`` are two columns."""
 
     rows: list[dict]
     methods: list[str]
@@ -41,8 +43,7 @@ class Board:
     recordings: list[str] = field(default_factory=list)
     """Every recording any method was scored on, or that a scored submission left out."""
     star: dict[tuple[str, str, float], dict[str, float]] = field(default_factory=dict)
-    """Siemens-star figures (``mtf*_cyc_px`` columns of results.csv) per (method, scene, lux); the scene name
-    carries ``×k`` for a speed factor k other than 1."""
+    """Siemens-star figures (``mtf*_cyc_px`` columns of results.csv) per (method, scene column, lux)."""
 
     def coverage(self, method: str) -> int:
         """How many recordings of the board ``method`` was scored on (failed runs not counted)."""
@@ -90,6 +91,12 @@ def normalise_speed(row: dict) -> dict:
     return row
 
 
+def scene_column(row: dict) -> str:
+    """The scene's column label: its name, with ``×k`` for a speed factor k other than 1 (each speed is a column,
+    so a table never averages a scene's slow and fast recordings together)."""
+    return row["scene"] if row["speed_factor"] == 1.0 else f"{row['scene']} ×{row['speed_factor']:g}"
+
+
 def missing_recordings(results_dirs) -> set[str]:
     """Recordings a scored submission left out (``missing_recordings`` of its ``results.json``)."""
     out: set[str] = set()
@@ -126,7 +133,7 @@ def build_board(results_dirs) -> Board:
             m["errors"].append(r["error"])
             continue
         m["recordings"].add(r["recording"])
-        per_cell[(r["method"], r["scene"], float(r["lux"]))].append(r["psnr_db"])
+        per_cell[(r["method"], scene_column(r), float(r["lux"]))].append(r["psnr_db"])
         m["bw_khz"].append(r.get("bandwidth_khz_per_pixel", float("nan")))
         m["bw_bits"].append(r.get("bandwidth_bits_per_pixel_s", float("nan")))
         m["bw_khz_by_lux"][float(r["lux"])].append(r.get("bandwidth_khz_per_pixel", float("nan")))
@@ -134,16 +141,15 @@ def build_board(results_dirs) -> Board:
         m["psnr"].append(r["psnr_db"])
         m["ssim"].append(r.get("ssim", float("nan")))
     psnr = {k: mean_finite(v) for k, v in per_cell.items()}
-    mtf = {(r["method"], r["scene"], float(r["lux"])): r.get("mtf50_cyc_px", float("nan")) for r in rows
+    mtf = {(r["method"], scene_column(r), float(r["lux"])): r.get("mtf50_cyc_px", float("nan")) for r in rows
            if not r.get("error") and math.isfinite(r.get("mtf50_cyc_px", float("nan")))}
     star = {}
     for r in rows:
         figures = {k: v for k, v in r.items() if k.startswith("mtf") and k.endswith("_cyc_px")
                    and isinstance(v, float) and math.isfinite(v)}
         if figures and not r.get("error"):
-            scene = r["scene"] if r["speed_factor"] == 1.0 else f"{r['scene']} ×{r['speed_factor']:g}"
-            star[(r["method"], scene, float(r["lux"]))] = figures
-    columns = sorted({(r["scene"], float(r["lux"])) for r in rows})
+            star[(r["method"], scene_column(r), float(r["lux"]))] = figures
+    columns = sorted({(scene_column(r), float(r["lux"])) for r in rows})
     for m in info.values():
         m["bw_khz_mean"] = mean_finite(m["bw_khz"])
         m["bw_bits_mean"] = mean_finite(m["bw_bits"])
