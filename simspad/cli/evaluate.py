@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from simspad.evaluate.evaluate import EvaluationFailed, evaluate
-from simspad.io.results_dir import recording_key
+from simspad.io.names import recording_key
 
 
 def summary_table(rows: list[dict]) -> str:

@@ -22,8 +22,8 @@ import re
 import shutil
 from pathlib import Path
 
-from simspad.dataset.speed import speed_suffix
 from simspad.errors import SimSpadError
+from simspad.io.names import lux_label, speed_suffix
 from simspad.io.provenance import utc_now
 from simspad.io.render_dir import read_render_dir
 from simspad.render.keyframe_files import frame_is_intact
@@ -33,12 +33,6 @@ RENDERS_DIR = "renders"
 RECORDINGS_DIR = "recordings"
 #: Temporary names written by simspad.io.atomic.temporary_sibling: ``.<name>.tmp-<pid>-<8 hex>``.
 _TMP_NAME = re.compile(r"^\..+\.tmp-\d+-[0-9a-f]{8}$")
-
-
-def lux_label(lux: float) -> str:
-    """The lux level as it appears in file names: ``1``, ``10000``, ``0.5``."""
-    lux = float(lux)
-    return str(int(lux)) if lux.is_integer() and abs(lux) < 1e15 else repr(lux)
 
 
 def recording_rel_path(sequence_name: str, lux: float, speed: float = 1.0) -> str:

@@ -20,7 +20,8 @@ from simspad import __version__
 from simspad.dataset.directory import RENDERS_DIR, recording_rel_path
 from simspad.dataset.portable import portable_sequence, portable_trajectory
 from simspad.dataset.spec_hashing import canonical_json, sequence_hash, spec_hash
-from simspad.dataset.speed import speed_keys, speed_suffix
+from simspad.dataset.speed import speed_keys
+from simspad.io.names import speed_suffix
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_seed
 from simspad.scenes.library import resolve_scene

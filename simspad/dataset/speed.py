@@ -21,17 +21,6 @@ from simspad.scenes.library import resolve_scene
 DEFAULT_SPEEDS = (1.0,)
 
 
-def speed_label(k: float) -> str:
-    """The factor as it appears in names: ``8``, ``0.5``, ``2.5``."""
-    k = float(k)
-    return str(int(k)) if k.is_integer() and abs(k) < 1e15 else repr(k)
-
-
-def speed_suffix(k: float) -> str:
-    """``""`` for k = 1 (names as without a speed axis), else ``"_x<k>"``."""
-    return "" if float(k) == 1.0 else f"_x{speed_label(k)}"
-
-
 def speed_keys(k: float) -> tuple:
     """Extra seed-stream keys of factor ``k``: none for k = 1, else ``("speed", k)``."""
     return () if float(k) == 1.0 else ("speed", float(k))

@@ -14,8 +14,8 @@ from pathlib import Path
 from simspad.errors import SimSpadError
 from simspad.io.manifest import MANIFEST_NAME, recording_mismatch
 from simspad.io.manifest import read_manifest as read_dataset_manifest
+from simspad.io.names import recording_key
 from simspad.io.recording import open_recording
-from simspad.io.results_dir import recording_key
 from simspad.io.safe_paths import confined_path
 
 

@@ -46,13 +46,6 @@ def slug(text: str) -> str:
     return s
 
 
-def recording_key(sequence: str, lux: float, speed_factor: float = 1.0) -> str:
-    """The key of a recording: ``<sequence>[_x<k>]_<lux>lx`` (numbers in shortest ``%g`` form; the speed part only
-    for a speed factor k other than 1), e.g. ``office_10lx``, ``office_x16_10lx``."""
-    speed = "" if float(speed_factor) == 1.0 else f"_x{float(speed_factor):g}"
-    return f"{sequence}{speed}_{lux:g}lx"
-
-
 def _fmt(v) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
