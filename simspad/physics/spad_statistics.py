@@ -59,9 +59,10 @@ def log_flux_variance(flux_ph_s_m2, n_bins: int, q_m2: float, gate_s: float, dcr
     """Cramér–Rao variance of ``ln Φ̂``: ``(e^y − 1)/(n·x²)``, ``x = q·Φ·gate_s``, ``y = x + r_dark·gate_s``.
 
     With ``r_dark = 0`` this is docs/sensors.md's ``(eˣ − 1)/(n·x²)``; the dark counts add to the detection
-    probability (y) but carry no signal (x).
+    probability (y) but carry no signal (x). A pixel whose every bin fires (y ≳ 709, far past saturation) gets
+    +inf: its count says nothing about Φ, and ``eʸ`` overflows float64 exactly there.
     """
     x = q_m2 * np.asarray(flux_ph_s_m2, dtype=np.float64) * gate_s
     y = x + np.asarray(dcr_cps, dtype=np.float64) * gate_s
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return np.expm1(y) / (n_bins * x * x)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -102,6 +103,9 @@ def test_estimate_flux_inverts_probability_and_clamps():
     full = estimate_flux(n, n, q, gate, dcr)
     assert np.isfinite(full) and np.isclose(full, (math.log(n) / gate - dcr) / q)
     assert np.isclose(log_flux_variance(1.0, 100, 1.0, 1.0), (math.e - 1) / 100)  # x = 1, no dark counts
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # far past saturation: +inf, and no overflow warning on the way
+        assert log_flux_variance(1e3, 100, 1.0, 1.0) == math.inf
 
 
 def test_auto_gate_solves_the_percentile_and_clips():
