@@ -128,9 +128,10 @@ def project(camera: PinholeCamera, points_world: np.ndarray, camera_to_world: np
     """
     m = np.asarray(camera_to_world, dtype=np.float64)
     p = np.asarray(points_world, dtype=np.float64)
-    p_cam = (p - m[:3, 3]) @ m[:3, :3]  # world → camera: Rᵀ·(p − o) for a rigid pose
-    z = p_cam[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
+        # Background pixels (no hit) carry infinite points: inf·0 in the product gives the NaN they should get.
+        p_cam = (p - m[:3, 3]) @ m[:3, :3]  # world → camera: Rᵀ·(p − o) for a rigid pose
+        z = p_cam[..., 2]
         inv = np.where(z > 0, 1.0 / z, np.nan)
         col = -p_cam[..., 0] * inv * camera.focal_px + 0.5 * camera.width - 0.5
         row = -p_cam[..., 1] * inv * camera.focal_px + 0.5 * camera.height - 0.5
