@@ -445,7 +445,8 @@ def disk_needed_bytes(spec, out_dir) -> int:
             per += n_bins(seq.duration_s, spad.params.bin_s, gate) * h * math.ceil(w / 8)
         if frames is not None:
             per += int(seq.duration_s * frames.params.frame_rate_hz) * w * h * 2
-        for lux in spec.lux:
-            if not (Path(out_dir) / recording_rel_path(seq.name, lux)).is_file():
-                total += per
+        for k in spec.speed:  # every speed factor is a recording of its own
+            for lux in spec.lux:
+                if not (Path(out_dir) / recording_rel_path(seq.name, lux, k)).is_file():
+                    total += per
     return total

@@ -8,6 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
+from simspad.dataset.estimate import disk_needed_bytes
 from simspad.dataset.executors import ExecutorConfig
 from simspad.dataset.generate import generate
 from simspad.dataset.plan import make_plan
@@ -16,6 +17,7 @@ from simspad.errors import SpecError
 from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.manifest import read_manifest
 from simspad.io.trajectory_files import load_trajectory
+from simspad.sensors.spad.model import n_bins
 
 MOTION_ATTRS = ("speed_factor", "image_speed_px_s_p50", "image_speed_px_s_p95", "frame_blur_px_p95")
 
@@ -52,6 +54,27 @@ def test_spec_without_speed_plans_exactly_as_speed_one(tmp_path):
     assert [r.rel_path for r in plain.recordings][:2] == ["recordings/office/office_10lx.h5",
                                                           "recordings/office/office_100lx.h5"]
     assert all("speed_factor" not in dict(r.metadata) for r in plain.recordings)
+
+
+def test_disk_check_counts_every_speed_and_skips_recordings_already_there(tmp_path):
+    sensors = '[sensors.spad]\npreset = "swissspad2"\n[sensors.frames]\npreset = "blackfly_s"\n'
+    one = load_spec(_spec(tmp_path, "", sensors=sensors))
+    both = load_spec(_spec(tmp_path, "speed = [1, 8]", sensors=sensors))
+    out = tmp_path / "ds"
+    need_one, need_both = disk_needed_bytes(one, out), disk_needed_bytes(both, out)
+    w, h = 80, 60
+    gt = int(both.evaluation.rate_hz * 0.05) * w * h * 4
+    spad_p, frame_p = both.sensors["spad"].params, both.sensors["frames"].params
+    spad = n_bins(0.05, spad_p.bin_s, spad_p.bin_s) * h * (w // 8)  # auto gate: counted at one bin
+    frames = int(0.05 * frame_p.frame_rate_hz) * w * h * 2
+    assert need_one == 2 * 2 * (gt + spad + frames)  # 2 sequences × 2 lux levels
+    assert need_both == 2 * need_one
+    # A recording already written is not counted again, whatever its speed.
+    rel = make_plan(both, "2025-01-01T00:00:00Z").recordings[-1].rel_path
+    assert "_x8_" in rel
+    (out / rel).parent.mkdir(parents=True)
+    (out / rel).write_bytes(b"")
+    assert disk_needed_bytes(both, out) == need_both - (gt + spad + frames)
 
 
 def test_each_speed_gets_its_own_render_names_and_seeds(tmp_path):
