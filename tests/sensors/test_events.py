@@ -1,6 +1,7 @@
 """Event camera: threshold counts, noise statistics vs lux, refractory period, unclumped timestamps, lag."""
 
 import dataclasses
+import math
 
 import numba
 import numpy as np
@@ -373,3 +374,31 @@ def test_exact_integrator_is_the_limit_of_a_brute_force_per_frame_simulation(tmp
     assert errors[16] / errors[64] > 2.5 and errors[64] / errors[256] > 2.5  # converging, not levelling off
     assert errors[256] < 0.1
     assert _count_error(default, converged, shape[0] * shape[1], window) < 0.15
+
+
+def test_knot_table_matches_the_kernels_own_expressions_bit_for_bit():
+    """The per-tile knot table (ln I, I^(−γ/2), slope, 1/|slope|) equals what the kernel computed in place, bit for
+    bit, including a repeated knot (empty piece), a flat piece and a current below the floor."""
+    from simspad.physics.photoreceptor import MIN_CURRENT_E_S
+    from simspad.sensors.events.knot_table import fill_knot_table
+
+    rng = np.random.default_rng(5)
+    knot_t = np.array([0.0, 1e-3, 1e-3, 2.5e-3, 4e-3])
+    current = rng.lognormal(10.0, 2.0, size=(7, knot_t.size))
+    current[1, 3:] = current[1, 2]  # flat pieces
+    current[2, 0] = 0.0  # below the floor
+    gamma = 0.5
+    n_tile = 4
+    tabs = [np.full((n_tile, knot_t.size), np.nan), np.full((n_tile, knot_t.size), np.nan),
+            np.full((n_tile, knot_t.size - 1), np.nan), np.full((n_tile, knot_t.size - 1), np.nan)]
+    fill_knot_table(knot_t, current, 1, 4, gamma, *tabs)
+    clamped = np.maximum(current[1:4], MIN_CURRENT_E_S)
+    log_i = np.array([[math.log(v) for v in row] for row in clamped])
+    np.testing.assert_array_equal(tabs[0][:3], log_i)
+    np.testing.assert_array_equal(tabs[1][:3], np.array([[math.exp(-0.5 * gamma * v) for v in row] for row in log_i]))
+    seg = np.diff(knot_t)
+    slope = np.where(seg > 0, np.diff(clamped, axis=1) / np.where(seg > 0, seg, 1.0), 0.0)
+    np.testing.assert_array_equal(tabs[2][:3], slope)
+    np.testing.assert_array_equal(tabs[3][:3], np.where(slope != 0, 1.0 / np.abs(np.where(slope != 0, slope, 1.0)), 0))
+    assert (tabs[2][:3, 1] == 0).all() and (tabs[2][0, 2:] == 0).all() and (tabs[3][0, 2:] == 0).all()
+    assert np.isnan(tabs[0][3]).all()  # rows past the tile untouched

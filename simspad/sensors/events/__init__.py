@@ -3,6 +3,7 @@
 - :mod:`.model` — the model's equations, event labels, fixed pattern (:class:`PixelMaps`), parameter checks;
 - :mod:`.crossing` — threshold crossings of the change detector inside one internal step;
 - :mod:`.kernel` — the per-pixel integrator (numba) and the records it takes;
+- :mod:`.knot_table` — ln I and slopes at the knots, computed a tile of pixels ahead of the integrator;
 - :mod:`.codes` — an event's pixel, polarity and label packed in one int64;
 - :mod:`.sort` — the canonical (µs, pixel) order of a chunk's events;
 - :mod:`.simulator` — the streaming simulator and the ``/events`` writer.

@@ -14,7 +14,8 @@ and hot hazards and the leak phase; at a noise event its next hazard then its po
 jitter.
 
 Cost: an internal step costs one exp and no log (a step cut by the tolerance rule advances ln I by a per-pixel
-constant; ln I at keyframes is taken once per pixel and keyframe); a crossing costs about two exp (Halley
+constant; ln I at keyframes is taken once per pixel and keyframe, a tile of pixels at a time ahead of
+the sequential loop, :mod:`.knot_table`); a crossing costs about two exp (Halley
 iterations); noise processes cost a multiply per step until they fire.
 
 The kernels take small NamedTuples (numba passes them as structs, at no cost) instead of long positional lists,
@@ -35,6 +36,7 @@ from simspad.physics.photoreceptor import MIN_CURRENT_E_S, time_constant_pair
 from simspad.physics.rng import exponential, normal, uniform_positive
 from simspad.sensors.events.codes import pack_code
 from simspad.sensors.events.crossing import Detector, first_crossing
+from simspad.sensors.events.knot_table import TILE_PIXELS, fill_knot_table
 from simspad.sensors.events.model import LABEL_HOT, LABEL_LEAK, LABEL_SHOT, LABEL_SIGNAL
 from simspad.sensors.presets import EventParams
 
@@ -180,7 +182,16 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
     buf_t, buf_code = buf.t_s, buf.code
     n_knots = knot_t.size
     n_ev = start
+    # ln I, I^(−γ/2) and the slopes at the knots, a tile of pixels at a time (:mod:`.knot_table`)
+    tab_log = np.empty((TILE_PIXELS, n_knots))
+    tab_g = np.empty((TILE_PIXELS, n_knots))
+    tab_slope = np.empty((TILE_PIXELS, max(n_knots - 1, 1)))
+    tab_inv_slope = np.empty((TILE_PIXELS, max(n_knots - 1, 1)))
     for p in range(p0, p1):
+        q = (p - p0) % TILE_PIXELS
+        if q == 0:
+            fill_knot_table(knot_t, knot_current, p, min(p + TILE_PIXELS, p1), shot_exp, tab_log, tab_g, tab_slope,
+                            tab_inv_slope)
         n_first = n_ev
         theta_on = th_on[p]
         theta_off = th_off[p]
@@ -202,8 +213,8 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
         hz_hot = hzh_state[p]
         rs = rng_state[p]
         ib = max(knot_current[p, 0], MIN_CURRENT_E_S)
-        l_b = math.log(ib)  # ln I at the next knot: one log per pixel and knot, none per internal step
-        g_b = math.exp(-0.5 * shot_exp * l_b)  # I^(−γ/2): the shot-noise rate of a step is r₁I₁^γ·g(start)·g(end)
+        l_b = tab_log[q, 0]  # ln I at the next knot: one log per pixel and knot, none per internal step
+        g_b = tab_g[q, 0]  # I^(−γ/2): the shot-noise rate of a step is r₁I₁^γ·g(start)·g(end)
         for j in range(n_knots - 1):
             ta = knot_t[j]
             tb = knot_t[j + 1]
@@ -212,13 +223,12 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
             l_a = l_b
             g_a = g_b
             ib = max(knot_current[p, j + 1], MIN_CURRENT_E_S)
-            if ib != ia:
-                l_b = math.log(ib)
-                g_b = math.exp(-0.5 * shot_exp * l_b)
+            l_b = tab_log[q, j + 1]
+            g_b = tab_g[q, j + 1]
             if seg <= 0.0:
                 continue
-            slope = (ib - ia) / seg
-            inv_abs_slope = 1.0 / abs(slope) if slope != 0.0 else 0.0
+            slope = tab_slope[q, j]
+            inv_abs_slope = tab_inv_slope[q, j]
             t = ta
             i_t = ia
             l_t = l_a
