@@ -4,11 +4,15 @@ of the linear schedule (``--interpolation linear``, the naive reference), in the
 For every built-in scene (its default trajectory) and for a fast pan with parallax (bench_render.py's textured
 wall + boxes, a yaw burst plus translation) it measures
 
-1. Mitsuba renders per sequence: keyframes rendered (plus the two noise-probe renders of the warp schedule);
+1. Mitsuba renders per sequence: keyframes rendered (plus the two noise-probe renders of the warp schedule), and
+   the warp schedule's 1-spp depth + id passes (one per synthesized keyframe; the wall-time columns say what
+   everything cost);
 2. accuracy: relative RMSE of the timeline's luminance at random instants against converged renders
    (``--ref-spp`` samples, same pose), so Monte Carlo noise counts;
 3. events: ON and OFF counts of the event simulator (its own noise sources off, the same pixel maps) on both
-   timelines; frozen screen-space noise that warping moved would show up as extra events.
+   timelines; frozen screen-space noise that warping moved would show up as extra events. With
+   ``--events-spp N`` also those of an all-render timeline at N spp: how many of the linear timeline's events
+   are Monte Carlo noise (under camera motion the fixed-seed noise does not stay frozen).
 
 On the pan it also sweeps the linear schedule's ``max_flow_px`` and the warp stride, and plots error against render
 count for both (PNG). Run: ``python benchmarks/bench_warp.py [--out PNG]``.
@@ -86,34 +90,50 @@ def event_counts(tl: Timeline) -> tuple[int, int]:
     return on, off
 
 
-def run(scene, ts, settings: RenderSettings, out: Path):
+def run(scene, ts, settings: RenderSettings, out: Path, with_geometry: bool = False):
+    """Render ``out``; returns the timeline, its radiance renders (noise probes included), the wall time (s) and,
+    with ``with_geometry``, the depth + id passes of its synthesized keyframes."""
     tic = time.perf_counter()
     s = render_sequence(scene, ts, settings, out_dir=out, progress=False)
     tl = Timeline.open(out)
     n = s.n_keyframes - s.n_warped + (NOISE_PROBE_RENDERS if settings.interpolation == "warp" else 0)
+    if with_geometry:
+        geo = int(tl.meta["schedule"].get("warp", {}).get("n_geometry_passes", 0))
+        return tl, n, time.perf_counter() - tic, geo
     return tl, n, time.perf_counter() - tic
 
 
-def compare(name, scene, ts, settings, work: Path, instants, ref_spp) -> dict:
-    """One scene: linear (every keyframe rendered) against warp, same settings otherwise."""
+def compare(name, scene, ts, settings, work: Path, instants, ref_spp, events_spp: int = 0) -> dict:
+    """One scene: linear (every keyframe rendered) against warp, same settings otherwise; with ``events_spp``
+    also the events of an all-render timeline at that many spp (how many of the linear count are noise)."""
     tl_lin, n_lin, s_lin = run(scene, ts, replace(settings, interpolation="linear"), work / f"{name}-linear")
-    tl_warp, n_warp, s_warp = run(scene, ts, replace(settings, interpolation="warp"), work / f"{name}-warp")
+    tl_warp, n_warp, s_warp, geo = run(scene, ts, replace(settings, interpolation="warp"), work / f"{name}-warp",
+                                       with_geometry=True)
     refs = converged(scene, ts, instants, settings.resolution, ref_spp)
     e_lin, e_warp = rel_rmse(tl_lin, refs), rel_rmse(tl_warp, refs)
     ev_lin, ev_warp = event_counts(tl_lin), event_counts(tl_warp)
     d_on = (ev_warp[0] - ev_lin[0]) / max(ev_lin[0], 1)
     d_off = (ev_warp[1] - ev_lin[1]) / max(ev_lin[1], 1)
-    print(f"{name:<13} {tl_lin.n_keyframes:>4} {n_lin:>6} {n_warp:>6} {n_lin / n_warp:>6.1f}x "
+    print(f"{name:<13} {tl_lin.n_keyframes:>4} {n_lin:>6} {n_warp:>6} {geo:>5} {n_lin / n_warp:>6.1f}x "
           f"{e_lin * 100:>8.2f} {e_warp * 100:>8.2f} {e_warp / e_lin:>6.2f} "
           f"{ev_lin[0]:>8} {ev_warp[0]:>8} {d_on * 100:>+6.1f}% {ev_lin[1]:>8} {ev_warp[1]:>8} {d_off * 100:>+6.1f}% "
           f"{s_lin:>6.1f} {s_warp:>6.1f}", flush=True)
-    return {"renders_linear": n_lin, "renders_warp": n_warp, "err_linear": e_lin, "err_warp": e_warp,
-            "events_linear": ev_lin, "events_warp": ev_warp}
+    out = {"renders_linear": n_lin, "renders_warp": n_warp, "err_linear": e_lin, "err_warp": e_warp,
+           "events_linear": ev_lin, "events_warp": ev_warp, "geometry_passes": geo}
+    if events_spp:
+        tl_hi, _, _ = run(scene, ts, replace(settings, interpolation="linear", spp=events_spp),
+                          work / f"{name}-linear-{events_spp}")
+        ev_hi = event_counts(tl_hi)
+        print(f"{'':<13} all-render timeline at {events_spp} spp: ON {ev_hi[0]}, OFF {ev_hi[1]} "
+              f"({settings.spp}-spp linear has {ev_lin[0] / max(ev_hi[0], 1):.2f}x / {ev_lin[1] / max(ev_hi[1], 1):.2f}x "
+              f"as many, warp {ev_warp[0] / max(ev_hi[0], 1):.2f}x / {ev_warp[1] / max(ev_hi[1], 1):.2f}x)", flush=True)
+        out["events_hi"] = ev_hi
+    return out
 
 
-HEADER = (f"{'scene':<13} {'kf':>4} {'r.lin':>6} {'r.warp':>6} {'fewer':>7} {'err.lin%':>8} {'err.warp%':>8} "
-          f"{'ratio':>6} {'ON lin':>8} {'ON warp':>8} {'dON':>7} {'OFF lin':>8} {'OFF warp':>8} {'dOFF':>7} "
-          f"{'t.lin':>6} {'t.warp':>6}")
+HEADER = (f"{'scene':<13} {'kf':>4} {'r.lin':>6} {'r.warp':>6} {'geo':>5} {'fewer':>7} {'err.lin%':>8} "
+          f"{'err.warp%':>8} {'ratio':>6} {'ON lin':>8} {'ON warp':>8} {'dON':>7} {'OFF lin':>8} {'OFF warp':>8} "
+          f"{'dOFF':>7} {'t.lin':>6} {'t.warp':>6}")
 
 
 def main(argv=None) -> int:
@@ -126,14 +146,17 @@ def main(argv=None) -> int:
     parser.add_argument("--instants", type=int, default=8, help="random instants per sequence")
     parser.add_argument("--scenes", default=",".join(builtin_scene_names()))
     parser.add_argument("--skip-pan", action="store_true")
+    parser.add_argument("--events-spp", type=int, default=0,
+                        help="also count the events of an all-render timeline at this many spp (0: off)")
     args = parser.parse_args(argv)
     res = tuple(int(v) for v in args.resolution.split("x"))
     variant = select_variant()
     work = Path(tempfile.mkdtemp(prefix="bench_warp-"))
     rng = np.random.default_rng(1)
     print(f"{res[0]}x{res[1]}, {args.spp} spp, variant {variant}, references {args.ref_spp} spp at "
-          f"{args.instants} random instants; renders of the warp schedule include its {NOISE_PROBE_RENDERS} "
-          "noise-probe renders; events: quiet event camera (no shot noise, leak or hot pixels) at "
+          f"{args.instants} random instants; renders (r.) are radiance renders, the warp schedule's include its "
+          f"{NOISE_PROBE_RENDERS} noise-probe renders; geo: its 1-spp depth + id passes (t.: wall time of each "
+          "schedule, s); events: quiet event camera (no shot noise, leak or hot pixels) at "
           f"{LUX:g} lx\n")
     print(HEADER)
     results = {}
@@ -141,7 +164,7 @@ def main(argv=None) -> int:
     for name in [s for s in args.scenes.split(",") if s]:
         instants = np.sort(rng.uniform(0.0, args.duration, args.instants))
         ts = load_trajectory(resolve_scene(name).default_trajectory)
-        results[name] = compare(name, name, ts, base, work, instants, args.ref_spp)
+        results[name] = compare(name, name, ts, base, work, instants, args.ref_spp, args.events_spp)
 
     rows_lin, rows_warp = [], []
     if not args.skip_pan:

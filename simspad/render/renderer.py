@@ -349,6 +349,7 @@ def _render_warped(plan: RenderPlan, loaded: LoadedScene, settings: RenderSettin
     sources = tuple(done.plan.sources)
     schedule = dict(plan.timeline["schedule"], interpolation="warp", n_rendered_keyframes=sources.count("render"),
                     warp={"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
+                          "n_geometry_passes": done.n_geometry,
                           **describe_disagreement(done.plan.disagreement)})
     plan = dataclasses.replace(plan, names=tuple(done.names), sources=sources,
                                timeline=dict(plan.timeline, schedule=schedule))

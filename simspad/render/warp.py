@@ -3,10 +3,12 @@
 A rendered keyframe (:class:`WarpSource`: linear RGB, depth Z, optional object ids, camera and object poses)
 is carried to the target pose by reprojection (:mod:`simspad.render.reprojection`):
 
-1. **Forward splat of geometry.** Every pixel of both sources is reprojected to the target and splatted to its
-   nearest target pixel through a z-buffer (nearest surface wins), giving the target's depth and object ids.
-   Holes left by magnification or disocclusion take the *farthest* depth around them (what a disocclusion
-   reveals is background).
+1. **Geometry of the target.** The renderer gives it: a depth + object-id pass rendered at the target pose
+   (1 spp, a few % of a radiance render at useful sizes). Without one, every pixel of both sources is
+   reprojected to the target and splatted to its nearest target pixel through a z-buffer (nearest surface
+   wins); holes left by magnification or disocclusion take the *farthest* depth around them (what a
+   disocclusion reveals is background). The splat misplaces silhouette pixels by up to a pixel, which is why
+   the renderer does not rely on it.
 2. **Backward warp of radiance.** Each target pixel's surface point is moved back to each source's instant (with
    its object's transform) and projected into the source, whose radiance is sampled there with a cubic spline.
    The sample counts only where it is the same surface (**consistency check**): the source sees the point at the
@@ -172,6 +174,17 @@ def target_geometry(camera: PinholeCamera, sources: list[_Prepared], to_camera, 
     return zbuf, ids, covered
 
 
+def _given_geometry(camera: PinholeCamera, depth_z, object_id) -> tuple[np.ndarray, np.ndarray]:
+    """A rendered target geometry as :func:`target_geometry` gives it: depth (m, inf: no hit) and int ids."""
+    z = np.asarray(depth_z, dtype=np.float64)
+    if z.shape != (camera.height, camera.width):
+        raise ValueError(f"target depth must be {(camera.height, camera.width)}, got {z.shape}")
+    z = np.where(np.isfinite(z), z, np.inf)
+    ids = (np.zeros(z.shape, dtype=np.int64) if object_id is None
+           else np.rint(np.asarray(object_id)).astype(np.int64))
+    return z, ids
+
+
 def _id_of_value(z: np.ndarray, ids: np.ndarray, target: np.ndarray) -> np.ndarray:
     """For each pixel, the id of a 3×3 neighbour whose depth equals ``target`` (0 if none)."""
     out = np.zeros_like(ids)
@@ -235,7 +248,7 @@ def _tile_noise_ratio(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -
 
 
 def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: float, to_camera: np.ndarray,
-               to_objects=(), noise_y: np.ndarray | None = None
+               to_objects=(), noise_y: np.ndarray | None = None, geometry: tuple | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, Disagreement]:
     """The keyframe at pose ``to_camera`` between rendered keyframes ``a`` and ``b``.
 
@@ -253,6 +266,11 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
     noise_y : ndarray [H, W], optional
         Monte Carlo noise (σ of luminance, absolute) of one render, per pixel: scales the disagreement
         (:attr:`Disagreement.noise_ratio`).
+    geometry : (depth_z, object_id), optional
+        The target's own depth (m, inf: no hit) and object ids (or None), rendered by a geometry pass
+        (:meth:`simspad.render.mitsuba_scene.MitsubaScene.render_depth_ids`). Used instead of the forward splat
+        (step 1), whose nearest-pixel rounding misplaces silhouette pixels by a pixel (on the fan's blades those
+        flicker into events); they are returned as the keyframe's depth and ids.
 
     Returns
     -------
@@ -266,7 +284,10 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
             ids = None if p.src.object_id is None else np.asarray(p.src.object_id, dtype=np.float32).copy()
             return (np.asarray(p.src.rgb, dtype=np.float32).copy(), np.asarray(p.src.depth_z, np.float32).copy(),
                     ids, Disagreement(0.0, 0.0, 0.0, float("nan") if noise_y is None else 0.0))
-    z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
+    if geometry is None:
+        z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
+    else:
+        z, ids = _given_geometry(camera, *geometry)
     finite = np.isfinite(z)
     z_far = np.where(finite, z, FAR_DEPTH_M)
     points = unproject(camera, z_far, to_camera)

@@ -33,7 +33,7 @@ from simspad.render.warp_schedule import (
 )
 
 #: Bumped when synthesized pixels from the same anchors would change: part of their cache key.
-WARP_VERSION = 1
+WARP_VERSION = 2  # 2: target geometry from a rendered depth + id pass instead of the forward splat
 #: Floor of the per-pixel render noise, as a fraction of its mean: a noiseless render (a flat scene) must not make
 #: every synthesized keyframe fail on round-off.
 MIN_NOISE = 0.05
@@ -51,6 +51,8 @@ class WarpedFrames(NamedTuple):
     stride: int  # anchor spacing used, keyframes
     threshold: float  # disagreement threshold used, in units of the render noise
     noise: float  # Monte Carlo noise of one render (RMS ÷ mean luminance), measured at the first keyframe
+    n_geometry: int  # depth + id passes rendered for synthesized keyframes
+    geometry_s: float  # wall time of those passes, s
 
 
 def warp_key(base_key: dict, stride: int, threshold: float) -> dict:
@@ -68,6 +70,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
     camera = PinholeCamera.from_fov(ms.x_fov_deg, ms.width, ms.height)
     object_names = ms.object_names
     frame_times, compiled, reused = [], [], [0]
+    geometry_times = []
 
     def poses_of(i: int) -> tuple:
         objects = object_poses(ts, float(times[i]))
@@ -89,6 +92,14 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
         compiled.append(counter.take())
         return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i))
 
+    def geometry(i: int) -> tuple:
+        """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance)."""
+        tic = time.perf_counter()
+        ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+        depth, object_id = ms.render_depth_ids(seed)
+        geometry_times.append(time.perf_counter() - tic)
+        return depth, object_id
+
     def write(i: int, rgb, depth, object_id) -> None:
         path = out_dir / warp_names[i]
         if not path.is_file():  # synthesis is deterministic: an existing file holds these very pixels
@@ -101,10 +112,10 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
         noise = float(np.sqrt(np.mean(noise_y ** 2)) / mean_y) if mean_y > 0 else 0.0
         noise_y = np.maximum(noise_y, MIN_NOISE * noise_y.mean())  # a noiseless render: round-off is no failure
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
-                                stride=stride, threshold=threshold, noise_y=noise_y,
+                                stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
                                 on_keyframe=lambda i: bar.update(1))
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
-                        noise)
+                        noise, len(geometry_times), float(sum(geometry_times)))
 
 
 def render_noise(ms: MitsubaScene, ts: TrajectorySet, t: float, camera_to_world: np.ndarray, seed: int

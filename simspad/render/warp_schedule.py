@@ -5,7 +5,8 @@ warp timeline is as dense in time as a linear one; only every ``stride``-th keyf
 up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesize`;
 if the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.Disagreement.score`),
 the keyframe in the middle is rendered for real and both halves are treated again (recursive bisection), down
-to neighbours. Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
+to neighbours. With a ``geometry`` callback (the renderer's 1-spp depth + id pass at each synthesized instant)
+the target's depth and ids are rendered rather than splatted from the sources. Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
 ``log2(stride)`` levels of re-synthesis are done per segment, and only two rendered keyframes per level are held
 in memory.
 """
@@ -66,6 +67,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                          write: Callable[[int, np.ndarray, np.ndarray, np.ndarray | None], None], *,
                          stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
                          noise_y: np.ndarray | None = None,
+                         geometry: Callable[[int], tuple] | None = None,
                          on_keyframe: Callable[[int], None] | None = None) -> WarpPlanResult:
     """Render the anchors, synthesize the rest, render where the warps disagree.
 
@@ -87,6 +89,10 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         ``noise_y`` is given).
     noise_y : ndarray [H, W], optional
         Monte Carlo noise of one render per pixel (absolute σ of luminance), see :func:`simspad.render.warp.synthesize`.
+    geometry : callable, optional
+        ``geometry(i) -> (depth_z, object_id)``: the rendered depth and ids of keyframe ``i`` (a geometry pass),
+        asked once per synthesized keyframe; without it the target geometry is splatted from the sources
+        (:func:`simspad.render.warp.synthesize`).
     on_keyframe : callable, optional
         Called with each keyframe index once it is final (progress).
 
@@ -99,8 +105,17 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     sources = [SOURCE_WARP] * n
     result = WarpPlanResult(sources)
     tick = on_keyframe or (lambda i: None)
+    geometries: dict = {}  # keyframe → its geometry pass, until it is written or rendered (≤ stride frames)
+
+    def geometry_of(i: int):
+        if geometry is None:
+            return None
+        if i not in geometries:
+            geometries[i] = geometry(i)
+        return geometries[i]
 
     def rendered(i: int):
+        geometries.pop(i, None)
         sources[i] = SOURCE_RENDER
         p = prepare(render(i))
         tick(i)
@@ -113,11 +128,12 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         for i in range(i0 + 1, i1):
             pose, objects = target(i)
             w = float((times[i] - times[i0]) / (times[i1] - times[i0]))
-            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y)
+            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y, geometry_of(i))
         worst = max(f[3].score() for f in frames.values())
         if worst <= threshold:
             for i, (rgb, depth, ids, dis) in frames.items():
                 write(i, rgb, depth, ids)
+                geometries.pop(i, None)
                 result.disagreement[i] = dis
                 tick(i)
             return
