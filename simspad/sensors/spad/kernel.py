@@ -48,24 +48,30 @@ _EVENTS_CAPACITY = 1024
 
 
 class ChunkLayout(NamedTuple):
-    """Time structure of one kernel call: bins grouped in runs over which the gate-mean flux is affine.
+    """Time structure of one kernel call (:func:`simspad.sensors.spad.layout.chunk_layout`): bins grouped in runs
+    over which the gate-mean flux is affine in the bin index.
 
-    Bin k belongs to run ``r = bin_run[k]``; its gate-mean flux is ``A_r + (B_r − A_r)·bin_w[k]`` with
-    ``A_r = images[run_ia[r]]`` and ``B_r = images[run_ib[r]]``; w advances by ``run_dw[r]`` per bin.
+    Bin k belongs to run ``r = bin_run[k]``; its Λ without dark counts is
+    ``Σ_t (term_c[t] + (k − run_k0[r])·term_dc[t])·images[term_img[t]]`` over ``t`` in
+    ``term_ptr[r] … term_ptr[r+1]−1`` (coefficients in m² s: detection area × gate × weight).
     """
 
     images: np.ndarray
-    """[I, H, W] float32: sensor-plane photon irradiance, photons s⁻¹ m⁻²; they bound every gate mean."""
-    run_ia: np.ndarray
-    """[R] int64: index in ``images`` of each run's start image A_r."""
-    run_ib: np.ndarray
-    """[R] int64: index in ``images`` of each run's end image B_r."""
-    run_dw: np.ndarray
-    """[R] float64: increase of the weight w per bin inside each run."""
+    """[S, H, W] float32: sensor-plane photon irradiance of keyframes, photons s⁻¹ m⁻² (a ring of slots)."""
+    slots: np.ndarray
+    """[I] int64: the slots of ``images`` this call uses; they bound every gate mean of the call."""
+    run_k0: np.ndarray
+    """[R] int64: first bin of each run."""
+    term_ptr: np.ndarray
+    """[R+1] int64: each run's terms are ``term_ptr[r] … term_ptr[r+1]−1``."""
+    term_img: np.ndarray
+    """[T] int64: slot of each term's keyframe."""
+    term_c: np.ndarray
+    """[T] float64: coefficient of each term at its run's first bin, m² s."""
+    term_dc: np.ndarray
+    """[T] float64: increase of each term's coefficient per bin, m² s."""
     bin_run: np.ndarray
     """[m] int64: run of each bin."""
-    bin_w: np.ndarray
-    """[m] float64: weight of B_r in each bin's gate mean."""
 
 
 class PixelResponse(NamedTuple):
@@ -142,23 +148,34 @@ def _secondaries(state, pending, countdown, k, y, x, shape, response):
 
 
 @numba.njit(inline="always")
-def _lam(layout, k, y, x, q_gate, dark):
-    """Λ of bin k at pixel (y, x): the gate's mean flux is affine in w within the bin's run."""
+def _lam(layout, k, y, x, dark):
+    """Λ of bin k at pixel (y, x): the weighted sum of its run's keyframes, plus the dark term."""
     r = layout.bin_run[k]
-    a = float(layout.images[layout.run_ia[r], y, x])
-    lam = q_gate * (a + (float(layout.images[layout.run_ib[r], y, x]) - a) * layout.bin_w[k]) + dark
+    dk = float(k - layout.run_k0[r])
+    lam = dark
+    for t in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
+        lam += (layout.term_c[t] + dk * layout.term_dc[t]) * float(layout.images[layout.term_img[t], y, x])
     return lam if lam > 0.0 else 0.0
+
+
+@numba.njit(inline="always")
+def _lam_slope(layout, r, y, x):
+    """Increase of Λ per bin inside run r at pixel (y, x)."""
+    slope = 0.0
+    for t in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
+        slope += layout.term_dc[t] * float(layout.images[layout.term_img[t], y, x])
+    return slope
 
 
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
 # countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
 @numba.njit(cache=True)
 def spad_chunk(out, layout, response, seed):
-    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [H, m, ceil(W/8)] (row-major scratch).
+    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [m, H, ceil(W/8)] (zeroed by the caller).
 
-    Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a gate that
-    straddles a keyframe is a run of its own with A = B = its exact mean), so the images bound every gate mean
-    of the call.
+    Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a weighted sum of
+    keyframes; a gate that straddles a keyframe is a run of its own), so the keyframes of the call bound every
+    gate mean.
 
     The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
     skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, assembled in a register, with
@@ -167,9 +184,9 @@ def spad_chunk(out, layout, response, seed):
 
     Parameters
     ----------
-    out : ndarray [H, m, ceil(W/8)] uint8
-        Packed bits, OR-ed into; rows outermost so that a pixel's bins lie in one contiguous span (the samplers
-        run pixel by pixel through time; bin-major writes would touch a page per bin). The caller transposes.
+    out : ndarray [m, H, ceil(W/8)] uint8
+        Packed bits, OR-ed into, in the recording's order (no transpose). The sparse sampler walks one byte
+        through time, but it runs row by row: a row's bytes of all bins span m cache lines, so they stay cached.
     layout : ChunkLayout
     response : PixelResponse
     seed : int
@@ -186,7 +203,8 @@ def spad_chunk(out, layout, response, seed):
     gate_s = response.gate_s
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
-    m = out.shape[1]
+    m = out.shape[0]
+    slots = layout.slots
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
     Wb = (W + 7) // 8
@@ -217,7 +235,7 @@ def spad_chunk(out, layout, response, seed):
                 x = 8 * xb + bit
                 hi = 0.0
                 lo = np.inf
-                for i in range(images.shape[0]):
+                for i in slots:
                     v = float(images[i, y, x])
                     hi = max(hi, v)
                     lo = min(lo, v)
@@ -264,10 +282,10 @@ def spad_chunk(out, layout, response, seed):
                         continue
                     x = 8 * xb + bit
                     if up >= lo_bound[bit]:
-                        lam = _lam(layout, k, y, x, q_gate, float(dcr[y, x]) * gate_s)
+                        lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
                         if up >= -math.expm1(-lam):
                             continue
-                    out[y, k, xb] |= np.uint8(1 << bit)
+                    out[k, y, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
                         state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape,
@@ -288,9 +306,8 @@ def spad_chunk(out, layout, response, seed):
                     for bit in range(min(8, W - 8 * dense_b[i])):
                         x = 8 * dense_b[i] + bit
                         dark = float(dcr[y, x]) * gate_s
-                        z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, q_gate, dark))
-                        a = float(images[layout.run_ia[r], y, x])
-                        slope = q_gate * (float(images[layout.run_ib[r], y, x]) - a) * layout.run_dw[r]
+                        z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, dark))
+                        slope = _lam_slope(layout, r, y, x)
                         ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
             for i in range(b0, b1):
                 ii = i - b0
@@ -306,7 +323,7 @@ def spad_chunk(out, layout, response, seed):
                     z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
                     # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
                     value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
-                out[dense_y[i], k, dense_b[i]] |= np.uint8(value)
+                out[k, dense_y[i], dense_b[i]] |= np.uint8(value)
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
