@@ -106,6 +106,8 @@ class Appender:
         self.n += data.shape[0]
         if self._pending_rows >= self.chunk_rows:
             self._write(final=False)
+        else:
+            self._pending[-1] = data.copy()  # kept past this call (less than a chunk): the caller may reuse its buffer
 
     def flush(self) -> None:
         """Write every buffered row (called by :class:`RecordingWriter` before closing)."""
@@ -130,7 +132,7 @@ class Appender:
             else:
                 self.dataset[self._written : self._written + block.shape[0]] = block
             self._written += block.shape[0]
-        rest = rows[end:]
+        rest = rows[end:].copy()  # less than a chunk, kept: a copy, so callers may reuse their buffers
         self._pending = [rest] if rest.shape[0] else []
         self._pending_rows = rest.shape[0]
 

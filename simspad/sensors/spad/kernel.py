@@ -43,8 +43,6 @@ _INV32 = 1.0 / 4294967296.0
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
 #: Dense bytes run through all bins of a chunk in blocks of this many, so their state stays in L1 cache.
 _DENSE_BLOCK = 128
-#: Initial capacity of the secondary-detection buffer (it doubles when full).
-_EVENTS_CAPACITY = 1024
 
 
 class ChunkLayout(NamedTuple):
@@ -93,33 +91,30 @@ class PixelResponse(NamedTuple):
 
 @numba.njit(inline="always")
 def _push(events, n_events, k, y, x):
-    if n_events == events.shape[0]:
-        grown = np.empty((2 * events.shape[0], 3), np.int64)
-        grown[:n_events] = events[:n_events]
-        events = grown
-    events[n_events, 0] = k
-    events[n_events, 1] = y
-    events[n_events, 2] = x
-    return events, n_events + 1
+    """Store a secondary detection if the buffer has room; count it either way (the caller then re-runs)."""
+    if n_events < events.shape[0]:
+        events[n_events, 0] = k
+        events[n_events, 1] = y
+        events[n_events, 2] = x
+    return n_events + 1
 
 
 @numba.njit(inline="always")
-def _secondaries(state, pending, countdown, k, y, x, shape, response):
+def _secondaries(state, events, n_events, countdown, k, y, x, shape, response):
     """Afterpulse and crosstalk trials of the primary detection at bin k, pixel (y, x).
 
-    ``pending`` is the secondary-detection buffer ``(events [n, 3] int64 (bin, row, col), n_events)``;
+    ``events`` [capacity, 3] int64 (bin, row, col) is the secondary-detection buffer holding ``n_events``;
     ``countdown`` holds ``(ap_left, ct_left)``: running geometric countdowns, the failures before the next
     success of a stream of Bernoulli trials (1 afterpulse trial and 4 crosstalk trials per detection), so the
-    cost is a subtraction per detection, not 5 uniforms. Returns the updated ``(state, pending, countdown)``.
+    cost is a subtraction per detection, not 5 uniforms. Returns the updated ``(state, n_events, countdown)``.
     """
-    events, n_events = pending
     ap_left, ct_left = countdown
     H, W = shape
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
     if log1m_ap < 0.0:
         if ap_left == 0:
-            events, n_events = _push(events, n_events, k + 1, y, x)
+            n_events = _push(events, n_events, k + 1, y, x)
             state, ap_left = geometric(state, log1m_ap)
         else:
             ap_left -= 1
@@ -139,12 +134,12 @@ def _secondaries(state, pending, countdown, k, y, x, shape, response):
             else:
                 xx = x + 1
             if 0 <= yy < H and 0 <= xx < W:
-                events, n_events = _push(events, n_events, k, yy, xx)
+                n_events = _push(events, n_events, k, yy, xx)
             remaining -= ct_left + 1
             nb += 1
             state, ct_left = geometric(state, log1m_ct)
         ct_left -= remaining
-    return state, (events, n_events), (ap_left, ct_left)
+    return state, n_events, (ap_left, ct_left)
 
 
 @numba.njit(inline="always")
@@ -170,8 +165,8 @@ def _lam_slope(layout, r, y, x):
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
 # countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
 @numba.njit(cache=True)
-def spad_chunk(out, layout, response, seed):
-    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [m, H, ceil(W/8)] (zeroed by the caller).
+def spad_chunk(out, events, layout, response, seed):
+    """Primary bits of one chunk of ``m`` bins into ``out`` [H, m, ceil(W/8)] (row-major scratch, zeroed here).
 
     Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a weighted sum of
     keyframes; a gate that straddles a keyframe is a run of its own), so the keyframes of the call bound every
@@ -180,13 +175,20 @@ def spad_chunk(out, layout, response, seed):
     The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
     skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, assembled in a register, with
     z = exp(−Λ) advanced by one multiplication per bin inside a run). The random stream is consumed in that
-    order: sparse bytes in raster order, then dense blocks.
+    order: row by row, the row's sparse bytes in raster order, then its dense bytes.
 
     Parameters
     ----------
-    out : ndarray [m, H, ceil(W/8)] uint8
-        Packed bits, OR-ed into, in the recording's order (no transpose). The sparse sampler walks one byte
-        through time, but it runs row by row: a row's bytes of all bins span m cache lines, so they stay cached.
+    out : ndarray [H, m, ceil(W/8)] uint8
+        Packed bits; each row is zeroed when the sampler reaches it, so the writes that follow hit the cache (the
+        whole scratch would not fit in it). Rows outermost so that a pixel's bins lie in one contiguous span (the
+        samplers run pixel by pixel through time). In bin-major order a byte's bins would lie H·ceil(W/8) bytes apart,
+        a multiple of 4 KiB at common widths: every write would miss the cache (they all map to the same sets).
+        :func:`rows_to_bins` reorders the result.
+    events : ndarray [capacity, 3] int64
+        Receives the secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as
+        (bin, row, col). A fixed buffer (no array is carried through the loops, which would cost reference
+        counting per detection); when it is too small the caller grows it and calls again with the same seed.
     layout : ChunkLayout
     response : PixelResponse
     seed : int
@@ -194,8 +196,8 @@ def spad_chunk(out, layout, response, seed):
 
     Returns
     -------
-    ndarray [n, 3] int64
-        Secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as (bin, row, col).
+    int
+        Number of secondary detections (those past ``capacity`` were not stored).
     """
     images = layout.images
     dcr = response.dcr_cps
@@ -203,7 +205,7 @@ def spad_chunk(out, layout, response, seed):
     gate_s = response.gate_s
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
-    m = out.shape[0]
+    m = out.shape[1]
     slots = layout.slots
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
@@ -216,15 +218,22 @@ def spad_chunk(out, layout, response, seed):
     if log1m_ct < 0.0:
         state, ct_left = geometric(state, log1m_ct)
     countdown = (ap_left, ct_left)
-    pending = (np.empty((_EVENTS_CAPACITY, 3), np.int64), np.int64(0))
+    n_events = np.int64(0)
     lam_dense = -math.log1p(-min(response.sparse_max_probability, 1.0 - 1e-12))
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
-    dense_y = np.empty(H * Wb, np.int64)
-    dense_b = np.empty(H * Wb, np.int64)
-    n_dense = 0
+    dense_b = np.empty(Wb, np.int64)
+    # dense bytes of each row run through all bins in blocks (their state stays in L1 cache) right after the
+    # row's sparse bytes, while the row's lines of the scratch are still cached
+    bin_run = layout.bin_run
+    z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
+    ratio = np.ones((_DENSE_BLOCK, 8), np.float64)
     for y in range(H):
+        n_dense = 0
+        for k in range(m):
+            for xb in range(Wb):
+                out[y, k, xb] = 0
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
@@ -244,7 +253,6 @@ def spad_chunk(out, layout, response, seed):
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
                 hi_byte = max(hi_byte, lam_hi[bit])
             if hi_byte >= lam_dense:
-                dense_y[n_dense] = y
                 dense_b[n_dense] = xb
                 n_dense += 1
                 continue
@@ -285,58 +293,53 @@ def spad_chunk(out, layout, response, seed):
                         lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
                         if up >= -math.expm1(-lam):
                             continue
-                    out[k, y, xb] |= np.uint8(1 << bit)
+                    out[y, k, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
-                        state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape,
-                                                                 response)
+                        state, n_events, countdown = _secondaries(state, events, n_events, countdown, k, y, x,
+                                                                  shape, response)
                     else:
                         countdown = (ap_left - 1, ct_left - 4)
-    # blocks of dense bytes run through all bins while their state stays in L1 cache
-    bin_run = layout.bin_run
-    z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
-    ratio = np.ones((_DENSE_BLOCK, 8), np.float64)
-    for b0 in range(0, n_dense, _DENSE_BLOCK):
-        b1 = min(b0 + _DENSE_BLOCK, n_dense)
-        for k in range(m):
-            r = bin_run[k]
-            if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
+        for b0 in range(0, n_dense, _DENSE_BLOCK):
+            b1 = min(b0 + _DENSE_BLOCK, n_dense)
+            for k in range(m):
+                r = bin_run[k]
+                if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
+                    for i in range(b0, b1):
+                        for bit in range(min(8, W - 8 * dense_b[i])):
+                            x = 8 * dense_b[i] + bit
+                            dark = float(dcr[y, x]) * gate_s
+                            z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, dark))
+                            slope = _lam_slope(layout, r, y, x)
+                            ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
                 for i in range(b0, b1):
-                    y = dense_y[i]
-                    for bit in range(min(8, W - 8 * dense_b[i])):
-                        x = 8 * dense_b[i] + bit
-                        dark = float(dcr[y, x]) * gate_s
-                        z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, dark))
-                        slope = _lam_slope(layout, r, y, x)
-                        ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
-            for i in range(b0, b1):
-                ii = i - b0
-                value = np.int64(0)
-                for bit in range(0, 8, 2):
-                    # two 32-bit uniforms per draw: p ≥ SPARSE_MAX_PROBABILITY here, so 2⁻³² resolution is ample
-                    state, w = next_u64(state)
-                    u0 = float(w & _M32) * _INV32
-                    u1 = float(w >> _S32) * _INV32
-                    z0 = z[ii, bit]
-                    z1 = z[ii, bit + 1]
-                    z[ii, bit] = z0 * ratio[ii, bit]
-                    z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
-                    # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
-                    value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
-                out[k, dense_y[i], dense_b[i]] |= np.uint8(value)
-                count = np.int64(_POPCOUNT8[value])
-                ap_left, ct_left = countdown
-                if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
-                    for bit in range(8):
-                        if (value >> bit) & 1:
-                            state, pending, countdown = _secondaries(state, pending, countdown, k, dense_y[i],
-                                                                     8 * dense_b[i] + bit, shape, response)
-                else:
-                    countdown = (ap_left - count, ct_left - 4 * count)
-        z[:] = 1.0
-        ratio[:] = 1.0
-    events, n_events = pending
-    return events[:n_events]
+                    ii = i - b0
+                    value = np.int64(0)
+                    for bit in range(0, 8, 2):
+                        # two 32-bit uniforms per draw: p ≥ SPARSE_MAX_PROBABILITY here, 2⁻³² resolution is ample
+                        state, w = next_u64(state)
+                        u0 = float(w & _M32) * _INV32
+                        u1 = float(w >> _S32) * _INV32
+                        z0 = z[ii, bit]
+                        z1 = z[ii, bit + 1]
+                        z[ii, bit] = z0 * ratio[ii, bit]
+                        z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
+                        # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
+                        value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
+                    out[y, k, dense_b[i]] |= np.uint8(value)
+                    count = np.int64(_POPCOUNT8[value])
+                    ap_left, ct_left = countdown
+                    if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
+                        for bit in range(8):
+                            if (value >> bit) & 1:
+                                state, n_events, countdown = _secondaries(state, events, n_events, countdown, k,
+                                                                          y, 8 * dense_b[i] + bit, shape,
+                                                                          response)
+                    else:
+                        countdown = (ap_left - count, ct_left - 4 * count)
+            z[:] = 1.0
+            ratio[:] = 1.0
+    return n_events
 
 
 @numba.njit(cache=True)
@@ -359,3 +362,23 @@ def apply_events(out, events, k_offset):
             rest[n_rest, 2] = x
             n_rest += 1
     return rest[:n_rest]
+
+
+#: Rows × bins per tile of :func:`rows_to_bins` (a tile's lines of both layouts stay in L1/L2 cache).
+_TILE = 16
+
+
+@numba.njit(cache=True)
+def rows_to_bins(rows, out):
+    """``out[k, y, :] = rows[y, k, :]``: the kernel's row-major scratch in the recording's bin-major order.
+
+    Copies whole packed lines of ``ceil(W/8)`` bytes, tile by tile (a strided NumPy transpose copies byte by byte
+    and misses the cache on every line).
+    """
+    H, m, Wb = rows.shape
+    for y0 in range(0, H, _TILE):
+        for k0 in range(0, m, _TILE):
+            for y in range(y0, min(y0 + _TILE, H)):
+                for k in range(k0, min(k0 + _TILE, m)):
+                    for b in range(Wb):
+                        out[k, y, b] = rows[y, k, b]

@@ -15,7 +15,13 @@ import numpy as np
 from tqdm import tqdm
 
 from simspad.sensors.presets import SpadParams
-from simspad.sensors.spad.kernel import SPARSE_MAX_PROBABILITY, PixelResponse, apply_events, spad_chunk
+from simspad.sensors.spad.kernel import (
+    SPARSE_MAX_PROBABILITY,
+    PixelResponse,
+    apply_events,
+    rows_to_bins,
+    spad_chunk,
+)
 from simspad.sensors.spad.layout import KeyframeRing, chunk_layout
 from simspad.sensors.spad.model import dcr_map, n_bins, resolve_gate, spad_attrs, validate_params
 
@@ -23,6 +29,8 @@ from simspad.sensors.spad.model import dcr_map, n_bins, resolve_gate, spad_attrs
 CHUNK_BYTES = 16 << 20
 MIN_CHUNK_BINS = 64
 MAX_CHUNK_BINS = 8192
+#: Initial capacity of the secondary-detection buffer of a kernel call (grown when a call finds more).
+EVENTS_CAPACITY = 4096
 #: Keyframes one kernel call may span (bounds the images held per call whatever the keyframe rate).
 MAX_KEYFRAMES_PER_CALL = 16
 
@@ -63,6 +71,8 @@ class SpadChunker:
                                       sparse_max_probability=SPARSE_MAX_PROBABILITY,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
+        self._rows = None
+        self._events = np.empty((EVENTS_CAPACITY, 3), np.int64)
         # a call touches at most MAX_KEYFRAMES_PER_CALL + 1 keyframes (the one before its first bin included)
         self._ring = KeyframeRing(flux_tl, MAX_KEYFRAMES_PER_CALL + 1)
         self.n_detections_secondary = 0
@@ -70,20 +80,24 @@ class SpadChunker:
     def chunk(self, k0: int, m: int, out: np.ndarray | None = None) -> np.ndarray:
         """Packed bits of bins ``k0 … k0+m−1`` as ``[m, H, ceil(W/8)]`` uint8. Call with consecutive ``k0``.
 
-        ``out``, when given with that shape, is zeroed and filled (the kernel ORs detections into it).
+        ``out``, when given with that shape, is overwritten and returned.
         """
         H, W = self.tl.height, self.tl.width
         shape = (m, H, (W + 7) // 8)
         if out is None or out.shape != shape:
-            out = np.zeros(shape, np.uint8)
-        else:
-            out.fill(0)
+            out = np.empty(shape, np.uint8)  # every bin is overwritten by its sub-chunk's reordering
         found = []
         for j0, n in self._sub_chunks(k0, m):
             starts = self.t0 + (k0 + j0 + np.arange(n)) * self.bin_s
             layout = chunk_layout(self._ring, starts, self.gate_s, self.bin_s, self.q_gate)
             seed = int(self.rng.integers(0, 2**63))
-            events = spad_chunk(out[j0 : j0 + n], layout, self.response, seed)
+            rows = self._scratch((H, n, shape[2]))
+            n_events = spad_chunk(rows, self._events, layout, self.response, seed)
+            if n_events > len(self._events):  # the buffer was short: grow it and draw the same bits again
+                self._events = np.empty((2 * n_events, 3), np.int64)
+                n_events = spad_chunk(rows, self._events, layout, self.response, seed)
+            rows_to_bins(rows, out[j0 : j0 + n])
+            events = self._events[:n_events].copy()
             events[:, 0] += j0
             found.append(events)
         events = np.concatenate(found)
@@ -95,6 +109,12 @@ class SpadChunker:
         # afterpulses of the very last bin fall outside the recording
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out
+
+    def _scratch(self, shape: tuple) -> np.ndarray:
+        """A row-major buffer [H, n, ceil(W/8)] for the kernel (which zeroes it), reused between calls."""
+        if self._rows is None or self._rows.shape != shape:
+            self._rows = np.empty(shape, np.uint8)
+        return self._rows
 
     def _sub_chunks(self, k0: int, m: int):
         """Split bins so that no kernel call spans more than :data:`MAX_KEYFRAMES_PER_CALL` keyframes.
@@ -171,11 +191,12 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)))
     chunker = SpadChunker(flux_tl, t0, n, resolved, dcr, rng)
     bar = tqdm(total=n, unit="bin", desc="spad", leave=False) if progress else None
+    buffer = None
     for k0 in range(0, n, m):
         mm = min(m, n - k0)
-        # a fresh array per chunk: the appender may keep a view of the rows short of a whole HDF5 chunk until
-        # the next append, so a reused buffer would overwrite them (m need not be a multiple of its chunk rows)
-        bits.append(chunker.chunk(k0, mm))
+        # one buffer for every chunk (the appender copies the rows it keeps): no fresh pages to fault in
+        buffer = chunker.chunk(k0, mm, out=buffer)
+        bits.append(buffer)
         t_start.append(t0 + (k0 + np.arange(mm)) * params.bin_s)
         if bar is not None:
             bar.update(mm)
