@@ -12,8 +12,9 @@ probability bound p_max (the flux is piecewise linear, so its bounds sit on keyf
   and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
   terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
   among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel;
-- *dense*: bin by bin, one uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
-  multiplication per bin inside a linear piece (Λ is affine in k there); the byte is assembled in a register.
+- *dense*: bin by bin, one 32-bit uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
+  multiplication per bin inside a linear piece (Λ is affine in k there). A row's dense pixels are drawn in one
+  vectorised loop (SplitMix64 draws addressed by counter, half a draw per pixel), then packed into bytes.
 
 The random stream is a SplitMix64 generator (:mod:`simspad.physics.rng`) inside the numba kernel, seeded per
 kernel call from the caller's ``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for
@@ -30,7 +31,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from simspad.physics.rng import geometric, next_u64, uniform
+from simspad.physics.rng import GOLDEN_GAMMA, geometric, mix64, uniform
 
 #: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
 #: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
@@ -39,10 +40,8 @@ SPARSE_MAX_PROBABILITY = 0.08
 # The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
 _S32 = np.uint64(32)
 _M32 = np.uint64(0xFFFFFFFF)
-_INV32 = 1.0 / 4294967296.0
+_TWO32 = 4294967296.0
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
-#: Dense bytes run through all bins of a chunk in blocks of this many, so their state stays in L1 cache.
-_DENSE_BLOCK = 128
 
 
 class ChunkLayout(NamedTuple):
@@ -227,8 +226,15 @@ def spad_chunk(out, events, layout, response, seed):
     # dense bytes of each row run through all bins in blocks (their state stays in L1 cache) right after the
     # row's sparse bytes, while the row's lines of the scratch are still cached
     bin_run = layout.bin_run
-    z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
-    ratio = np.ones((_DENSE_BLOCK, 8), np.float64)
+    t_even = np.empty(4 * Wb, np.float64)
+    t_odd = np.empty(4 * Wb, np.float64)
+    f_even = np.empty(4 * Wb, np.float64)
+    f_odd = np.empty(4 * Wb, np.float64)
+    hit_even = np.empty(4 * Wb, np.uint8)
+    hit_odd = np.empty(4 * Wb, np.uint8)
+    gammas = np.empty(4 * Wb, np.uint64)
+    for q in range(4 * Wb):
+        gammas[q] = np.uint64(q + 1) * GOLDEN_GAMMA
     for y in range(H):
         n_dense = 0
         for k in range(m):
@@ -300,45 +306,55 @@ def spad_chunk(out, events, layout, response, seed):
                                                                   shape, response)
                     else:
                         countdown = (ap_left - 1, ct_left - 4)
-        for b0 in range(0, n_dense, _DENSE_BLOCK):
-            b1 = min(b0 + _DENSE_BLOCK, n_dense)
-            for k in range(m):
-                r = bin_run[k]
-                if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
-                    for i in range(b0, b1):
-                        for bit in range(min(8, W - 8 * dense_b[i])):
-                            x = 8 * dense_b[i] + bit
-                            dark = float(dcr[y, x]) * gate_s
-                            z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, dark))
+        if n_dense == 0:
+            continue
+        # the dense bytes' pixels as (even, odd) pairs: one 64-bit draw gives both their 32-bit uniforms, and
+        # the draws of a bin are addressed by counter (state + j·γ), so the loop over pairs vectorises
+        n_pairs = 4 * n_dense
+        for k in range(m):
+            r = bin_run[k]
+            if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
+                for i in range(n_dense):
+                    for bit in range(8):
+                        q = 4 * i + (bit >> 1)
+                        x = 8 * dense_b[i] + bit
+                        t = _TWO32  # z = 1 past the right edge: never a detection
+                        f = 1.0
+                        if x < W:
+                            t = _TWO32 * math.exp(-_lam(layout, k, y, x, float(dcr[y, x]) * gate_s))
                             slope = _lam_slope(layout, r, y, x)
-                            ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
-                for i in range(b0, b1):
-                    ii = i - b0
-                    value = np.int64(0)
-                    for bit in range(0, 8, 2):
-                        # two 32-bit uniforms per draw: p ≥ SPARSE_MAX_PROBABILITY here, 2⁻³² resolution is ample
-                        state, w = next_u64(state)
-                        u0 = float(w & _M32) * _INV32
-                        u1 = float(w >> _S32) * _INV32
-                        z0 = z[ii, bit]
-                        z1 = z[ii, bit + 1]
-                        z[ii, bit] = z0 * ratio[ii, bit]
-                        z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
-                        # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
-                        value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
-                    out[y, k, dense_b[i]] |= np.uint8(value)
-                    count = np.int64(_POPCOUNT8[value])
-                    ap_left, ct_left = countdown
-                    if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
-                        for bit in range(8):
-                            if (value >> bit) & 1:
-                                state, n_events, countdown = _secondaries(state, events, n_events, countdown, k,
-                                                                          y, 8 * dense_b[i] + bit, shape,
-                                                                          response)
-                    else:
-                        countdown = (ap_left - count, ct_left - 4 * count)
-            z[:] = 1.0
-            ratio[:] = 1.0
+                            f = math.exp(-slope) if slope != 0.0 else 1.0
+                        if bit & 1:
+                            t_odd[q] = t
+                            f_odd[q] = f
+                        else:
+                            t_even[q] = t
+                            f_even[q] = f
+            # bit = 1 when u < 1 − z, i.e. u·2³² ≥ z·2³² = t (exact: a power-of-two scale); t advances by one
+            # multiplication per bin inside a run
+            for q in range(n_pairs):
+                w = mix64(state + gammas[q])
+                hit_even[q] = float(np.int64(w & _M32)) >= t_even[q]
+                hit_odd[q] = float(np.int64(w >> _S32)) >= t_odd[q]
+                t_even[q] *= f_even[q]
+                t_odd[q] *= f_odd[q]
+            state += np.uint64(n_pairs) * GOLDEN_GAMMA
+            for i in range(n_dense):
+                q = 4 * i
+                value = np.int64(hit_even[q] | (hit_odd[q] << 1) | (hit_even[q + 1] << 2) | (hit_odd[q + 1] << 3)
+                                 | (hit_even[q + 2] << 4) | (hit_odd[q + 2] << 5) | (hit_even[q + 3] << 6)
+                                 | (hit_odd[q + 3] << 7))
+                out[y, k, dense_b[i]] = np.uint8(value)
+                count = np.int64(_POPCOUNT8[value])
+                ap_left, ct_left = countdown
+                if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
+                    for bit in range(8):
+                        if (value >> bit) & 1:
+                            state, n_events, countdown = _secondaries(state, events, n_events, countdown, k,
+                                                                      y, 8 * dense_b[i] + bit, shape,
+                                                                      response)
+                else:
+                    countdown = (ap_left - count, ct_left - 4 * count)
     return n_events
 
 
