@@ -223,6 +223,8 @@ def spad_chunk(out, events, layout, response, seed):
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
     dense_b = np.empty(Wb, np.int64)
+    row_hi = np.empty(W, np.float32)
+    row_lo = np.empty(W, np.float32)
     # dense bytes of each row run through all bins in blocks (their state stays in L1 cache) right after the
     # row's sparse bytes, while the row's lines of the scratch are still cached
     bin_run = layout.bin_run
@@ -240,6 +242,18 @@ def spad_chunk(out, events, layout, response, seed):
         for k in range(m):
             for xb in range(Wb):
                 out[y, k, xb] = 0
+        # the row's flux bounds over the call's keyframes, keyframe by keyframe (contiguous: the loops vectorise)
+        first = slots[0]
+        for x in range(W):
+            v = images[first, y, x]
+            row_hi[x] = v if v > 0.0 else np.float32(0.0)
+            row_lo[x] = v
+        for j in range(1, len(slots)):
+            i = slots[j]
+            for x in range(W):
+                v = images[i, y, x]
+                row_hi[x] = v if v > row_hi[x] else row_hi[x]
+                row_lo[x] = v if v < row_lo[x] else row_lo[x]
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
@@ -248,12 +262,8 @@ def spad_chunk(out, events, layout, response, seed):
                 lam_lo[bit] = 0.0
             for bit in range(x_end):
                 x = 8 * xb + bit
-                hi = 0.0
-                lo = np.inf
-                for i in slots:
-                    v = float(images[i, y, x])
-                    hi = max(hi, v)
-                    lo = min(lo, v)
+                hi = float(row_hi[x])
+                lo = float(row_lo[x])
                 dark = float(dcr[y, x]) * gate_s
                 lam_hi[bit] = q_gate * hi + dark
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
