@@ -161,29 +161,36 @@ def _lam_slope(layout, r, y, x):
     return slope
 
 
+@numba.njit(inline="always")
+def _store_row(out, row, y):
+    """``out[k, y, :] = row[k, :]`` for every bin k: each line written once, whole."""
+    for k in range(row.shape[0]):
+        for xb in range(row.shape[1]):
+            out[k, y, xb] = row[k, xb]
+
+
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
 # countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
 @numba.njit(cache=True)
 def spad_chunk(out, events, layout, response, seed):
-    """Primary bits of one chunk of ``m`` bins into ``out`` [H, m, ceil(W/8)] (row-major scratch, zeroed here).
+    """Primary bits of one chunk of ``m`` bins into ``out`` [m, H, ceil(W/8)] (every byte written).
 
     Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a weighted sum of
     keyframes; a gate that straddles a keyframe is a run of its own), so the keyframes of the call bound every
     gate mean.
 
     The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
-    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, assembled in a register, with
-    z = exp(−Λ) advanced by one multiplication per bin inside a run). The random stream is consumed in that
-    order: row by row, the row's sparse bytes in raster order, then its dense bytes.
+    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, with z = exp(−Λ) advanced by one
+    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's
+    sparse bytes in raster order, then its dense bytes.
 
     Parameters
     ----------
-    out : ndarray [H, m, ceil(W/8)] uint8
-        Packed bits; each row is zeroed when the sampler reaches it, so the writes that follow hit the cache (the
-        whole scratch would not fit in it). Rows outermost so that a pixel's bins lie in one contiguous span (the
-        samplers run pixel by pixel through time). In bin-major order a byte's bins would lie H·ceil(W/8) bytes apart,
-        a multiple of 4 KiB at common widths: every write would miss the cache (they all map to the same sets).
-        :func:`rows_to_bins` reorders the result.
+    out : ndarray [m, H, ceil(W/8)] uint8
+        Packed bits in the recording's order. The samplers run pixel by pixel through time, so they write one
+        row of all bins at a time into an L1-resident [m, ceil(W/8)] buffer, which is then stored line by line.
+        (Written in place, a byte's bins lie H·ceil(W/8) bytes apart, a multiple of 4 KiB at common widths: they
+        map to the same cache sets and every write would miss.)
     events : ndarray [capacity, 3] int64
         Receives the secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as
         (bin, row, col). A fixed buffer (no array is carried through the loops, which would cost reference
@@ -204,7 +211,7 @@ def spad_chunk(out, events, layout, response, seed):
     gate_s = response.gate_s
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
-    m = out.shape[1]
+    m = out.shape[0]
     slots = layout.slots
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
@@ -224,9 +231,9 @@ def spad_chunk(out, events, layout, response, seed):
     lo_bound = np.empty(8, np.float64)
     dense_b = np.empty(Wb, np.int64)
     row_hi = np.empty(W, np.float32)
+    row = np.empty((m, Wb), np.uint8)  # one row of every bin: L1-resident while the samplers write it
     row_lo = np.empty(W, np.float32)
-    # dense bytes of each row run through all bins in blocks (their state stays in L1 cache) right after the
-    # row's sparse bytes, while the row's lines of the scratch are still cached
+    # dense bytes of each row run through all bins right after the row's sparse bytes, into the same row buffer
     bin_run = layout.bin_run
     t_even = np.empty(4 * Wb, np.float64)
     t_odd = np.empty(4 * Wb, np.float64)
@@ -241,7 +248,7 @@ def spad_chunk(out, events, layout, response, seed):
         n_dense = 0
         for k in range(m):
             for xb in range(Wb):
-                out[y, k, xb] = 0
+                row[k, xb] = 0
         # the row's flux bounds over the call's keyframes, keyframe by keyframe (contiguous: the loops vectorise)
         first = slots[0]
         for x in range(W):
@@ -309,19 +316,17 @@ def spad_chunk(out, events, layout, response, seed):
                         lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
                         if up >= -math.expm1(-lam):
                             continue
-                    out[y, k, xb] |= np.uint8(1 << bit)
+                    row[k, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
                         state, n_events, countdown = _secondaries(state, events, n_events, countdown, k, y, x,
                                                                   shape, response)
                     else:
                         countdown = (ap_left - 1, ct_left - 4)
-        if n_dense == 0:
-            continue
         # the dense bytes' pixels as (even, odd) pairs: one 64-bit draw gives both their 32-bit uniforms, and
         # the draws of a bin are addressed by counter (state + j·γ), so the loop over pairs vectorises
         n_pairs = 4 * n_dense
-        for k in range(m):
+        for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
                 for i in range(n_dense):
@@ -354,7 +359,7 @@ def spad_chunk(out, events, layout, response, seed):
                 value = np.int64(hit_even[q] | (hit_odd[q] << 1) | (hit_even[q + 1] << 2) | (hit_odd[q + 1] << 3)
                                  | (hit_even[q + 2] << 4) | (hit_odd[q + 2] << 5) | (hit_even[q + 3] << 6)
                                  | (hit_odd[q + 3] << 7))
-                out[y, k, dense_b[i]] = np.uint8(value)
+                row[k, dense_b[i]] = np.uint8(value)
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
@@ -365,6 +370,7 @@ def spad_chunk(out, events, layout, response, seed):
                                                                       response)
                 else:
                     countdown = (ap_left - count, ct_left - 4 * count)
+        _store_row(out, row, y)
     return n_events
 
 
@@ -388,23 +394,3 @@ def apply_events(out, events, k_offset):
             rest[n_rest, 2] = x
             n_rest += 1
     return rest[:n_rest]
-
-
-#: Rows × bins per tile of :func:`rows_to_bins` (a tile's lines of both layouts stay in L1/L2 cache).
-_TILE = 16
-
-
-@numba.njit(cache=True)
-def rows_to_bins(rows, out):
-    """``out[k, y, :] = rows[y, k, :]``: the kernel's row-major scratch in the recording's bin-major order.
-
-    Copies whole packed lines of ``ceil(W/8)`` bytes, tile by tile (a strided NumPy transpose copies byte by byte
-    and misses the cache on every line).
-    """
-    H, m, Wb = rows.shape
-    for y0 in range(0, H, _TILE):
-        for k0 in range(0, m, _TILE):
-            for y in range(y0, min(y0 + _TILE, H)):
-                for k in range(k0, min(k0 + _TILE, m)):
-                    for b in range(Wb):
-                        out[k, y, b] = rows[y, k, b]

@@ -19,7 +19,6 @@ from simspad.sensors.spad.kernel import (
     SPARSE_MAX_PROBABILITY,
     PixelResponse,
     apply_events,
-    rows_to_bins,
     spad_chunk,
 )
 from simspad.sensors.spad.layout import KeyframeRing, chunk_layout
@@ -71,7 +70,6 @@ class SpadChunker:
                                       sparse_max_probability=SPARSE_MAX_PROBABILITY,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
-        self._rows = None
         self._events = np.empty((EVENTS_CAPACITY, 3), np.int64)
         # a call touches at most MAX_KEYFRAMES_PER_CALL + 1 keyframes (the one before its first bin included)
         self._ring = KeyframeRing(flux_tl, MAX_KEYFRAMES_PER_CALL + 1)
@@ -85,18 +83,16 @@ class SpadChunker:
         H, W = self.tl.height, self.tl.width
         shape = (m, H, (W + 7) // 8)
         if out is None or out.shape != shape:
-            out = np.empty(shape, np.uint8)  # every bin is overwritten by its sub-chunk's reordering
+            out = np.empty(shape, np.uint8)  # the kernel writes every byte
         found = []
         for j0, n in self._sub_chunks(k0, m):
             starts = self.t0 + (k0 + j0 + np.arange(n)) * self.bin_s
             layout = chunk_layout(self._ring, starts, self.gate_s, self.bin_s, self.q_gate)
             seed = int(self.rng.integers(0, 2**63))
-            rows = self._scratch((H, n, shape[2]))
-            n_events = spad_chunk(rows, self._events, layout, self.response, seed)
+            n_events = spad_chunk(out[j0 : j0 + n], self._events, layout, self.response, seed)
             if n_events > len(self._events):  # the buffer was short: grow it and draw the same bits again
                 self._events = np.empty((2 * n_events, 3), np.int64)
-                n_events = spad_chunk(rows, self._events, layout, self.response, seed)
-            rows_to_bins(rows, out[j0 : j0 + n])
+                n_events = spad_chunk(out[j0 : j0 + n], self._events, layout, self.response, seed)
             events = self._events[:n_events].copy()
             events[:, 0] += j0
             found.append(events)
@@ -109,12 +105,6 @@ class SpadChunker:
         # afterpulses of the very last bin fall outside the recording
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out
-
-    def _scratch(self, shape: tuple) -> np.ndarray:
-        """A row-major buffer [H, n, ceil(W/8)] for the kernel (which zeroes it), reused between calls."""
-        if self._rows is None or self._rows.shape != shape:
-            self._rows = np.empty(shape, np.uint8)
-        return self._rows
 
     def _sub_chunks(self, k0: int, m: int):
         """Split bins so that no kernel call spans more than :data:`MAX_KEYFRAMES_PER_CALL` keyframes.
