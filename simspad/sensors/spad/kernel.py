@@ -153,15 +153,6 @@ def _lam(layout, k, y, x, dark):
 
 
 @numba.njit(inline="always")
-def _lam_slope(layout, r, y, x):
-    """Increase of Λ per bin inside run r at pixel (y, x)."""
-    slope = 0.0
-    for t in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
-        slope += layout.term_dc[t] * float(layout.images[layout.term_img[t], y, x])
-    return slope
-
-
-@numba.njit(inline="always")
 def _store_row(out, row, y):
     """``out[k, y, :] = row[k, :]`` for every bin k: each line written once, whole."""
     for k in range(row.shape[0]):
@@ -233,6 +224,8 @@ def spad_chunk(out, events, layout, response, seed):
     row_hi = np.empty(W, np.float32)
     row = np.empty((m, Wb), np.uint8)  # one row of every bin: L1-resident while the samplers write it
     row_lo = np.empty(W, np.float32)
+    lam_row = np.empty(W, np.float64)
+    slope_row = np.empty(W, np.float64)
     # dense bytes of each row run through all bins right after the row's sparse bytes, into the same row buffer
     bin_run = layout.bin_run
     t_even = np.empty(4 * Wb, np.float64)
@@ -329,6 +322,19 @@ def spad_chunk(out, events, layout, response, seed):
         for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
+                # Λ and its slope for the whole row, term by term over contiguous pixels (vectorised)
+                dk = float(k - layout.run_k0[r])
+                for x in range(W):
+                    lam_row[x] = float(dcr[y, x]) * gate_s
+                    slope_row[x] = 0.0
+                for term in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
+                    c = layout.term_c[term] + dk * layout.term_dc[term]
+                    dc = layout.term_dc[term]
+                    img = layout.term_img[term]
+                    for x in range(W):
+                        v = float(images[img, y, x])
+                        lam_row[x] += c * v
+                        slope_row[x] += dc * v
                 for i in range(n_dense):
                     for bit in range(8):
                         q = 4 * i + (bit >> 1)
@@ -336,8 +342,8 @@ def spad_chunk(out, events, layout, response, seed):
                         t = _TWO32  # z = 1 past the right edge: never a detection
                         f = 1.0
                         if x < W:
-                            t = _TWO32 * math.exp(-_lam(layout, k, y, x, float(dcr[y, x]) * gate_s))
-                            slope = _lam_slope(layout, r, y, x)
+                            t = _TWO32 * math.exp(-max(lam_row[x], 0.0))
+                            slope = slope_row[x]
                             f = math.exp(-slope) if slope != 0.0 else 1.0
                         if bit & 1:
                             t_odd[q] = t
@@ -347,19 +353,29 @@ def spad_chunk(out, events, layout, response, seed):
                             f_even[q] = f
             # bit = 1 when u < 1 − z, i.e. u·2³² ≥ z·2³² = t (exact: a power-of-two scale); t advances by one
             # multiplication per bin inside a run
+            total = np.int64(0)
             for q in range(n_pairs):
                 w = mix64(state + gammas[q])
-                hit_even[q] = float(np.int64(w & _M32)) >= t_even[q]
-                hit_odd[q] = float(np.int64(w >> _S32)) >= t_odd[q]
+                he = float(np.int64(w & _M32)) >= t_even[q]
+                ho = float(np.int64(w >> _S32)) >= t_odd[q]
+                hit_even[q] = he
+                hit_odd[q] = ho
+                total += np.int64(he) + np.int64(ho)
                 t_even[q] *= f_even[q]
                 t_odd[q] *= f_odd[q]
             state += np.uint64(n_pairs) * GOLDEN_GAMMA
+            ap_left, ct_left = countdown
+            quiet = ap_left >= total and ct_left >= 4 * total  # no secondary due in this row of this bin
+            if quiet:
+                countdown = (ap_left - total, ct_left - 4 * total)
             for i in range(n_dense):
                 q = 4 * i
                 value = np.int64(hit_even[q] | (hit_odd[q] << 1) | (hit_even[q + 1] << 2) | (hit_odd[q + 1] << 3)
                                  | (hit_even[q + 2] << 4) | (hit_odd[q + 2] << 5) | (hit_even[q + 3] << 6)
                                  | (hit_odd[q + 3] << 7))
                 row[k, dense_b[i]] = np.uint8(value)
+                if quiet:
+                    continue
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
