@@ -35,7 +35,7 @@ from simspad.physics.rng import GOLDEN_GAMMA, geometric, mix64, uniform
 
 #: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
 #: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
-#: benchmarks/bench_spad.py (a sparse detection costs ≈ 15× a dense bin; 0.02 and 0.05 were no faster).
+#: benchmarks/bench_spad.py (any value in 0.04–0.08 gave the same time at mean P(1) = 0.01 and 0.05).
 SPARSE_MAX_PROBABILITY = 0.08
 # The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
 _S32 = np.uint64(32)
@@ -307,7 +307,8 @@ def spad_chunk(out, events, layout, response, seed):
                     x = 8 * xb + bit
                     if up >= lo_bound[bit]:
                         lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
-                        if up >= -math.expm1(-lam):
+                        # p_k = 1 − e^(−Λ) lies in [Λ − Λ²/2, Λ]: the exponential only inside that band
+                        if up >= lam or (up >= lam * (1.0 - 0.5 * lam) and up >= -math.expm1(-lam)):
                             continue
                     row[k, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
