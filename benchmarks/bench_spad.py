@@ -316,10 +316,16 @@ def main() -> None:
     print(f"\nStorage filters: one streamed chunk of packed bits ({chunk_bins(args.size, args.size)} bins of "
           f"{args.size}x{args.size}), HDF5 chunks of {h5_chunk_bins(args.size, args.size)} bins")
     print(f"{'P(1)':>6} {'filter':>26} {'file MB':>8} {'ratio':>7} {'write MB/s':>11} {'read MB/s':>10}")
-    for r in filters(args.size, [0.001, 0.05]):
+    rows = filters(args.size, [0.001, 0.05])
+    for r in rows:
         print(f"{r['level']:6.3f} {r['filter']:>26} {r['file_mb']:8.2f} {r['ratio']:6.1f}× {r['write_mb_s']:11.0f} "
               f"{r['read_mb_s']:10.0f}")
     print("(MB/s of uncompressed packed bits per CPU second)")
+    for level in sorted({r["level"] for r in rows}):
+        at = [r for r in rows if r["level"] == level]
+        fast, small = max(at, key=lambda r: r["write_mb_s"]), max(at, key=lambda r: r["ratio"])
+        print(f"P(1) = {level:g}: fastest write '{fast['filter']}' ({fast['write_mb_s']:.0f} MB/s, "
+              f"{fast['ratio']:.1f}×), smallest '{small['filter']}' ({small['ratio']:.1f}×, {small['write_mb_s']:.0f} MB/s)")
     print(f"\nWarm-up of a fresh process (import + first chunk, numba cache): {warm_up_seconds():.2f} s wall")
     size = 256
     durations = [0.05, 0.2] if args.quick else [0.1, 0.4]
