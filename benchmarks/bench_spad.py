@@ -325,7 +325,8 @@ def main() -> None:
         at = [r for r in rows if r["level"] == level]
         fast, small = max(at, key=lambda r: r["write_mb_s"]), max(at, key=lambda r: r["ratio"])
         print(f"P(1) = {level:g}: fastest write '{fast['filter']}' ({fast['write_mb_s']:.0f} MB/s, "
-              f"{fast['ratio']:.1f}×), smallest '{small['filter']}' ({small['ratio']:.1f}×, {small['write_mb_s']:.0f} MB/s)")
+              f"{fast['ratio']:.1f}×), smallest '{small['filter']}' ({small['ratio']:.1f}×, "
+              f"{small['write_mb_s']:.0f} MB/s)")
     print(f"\nWarm-up of a fresh process (import + first chunk, numba cache): {warm_up_seconds():.2f} s wall")
     size = 256
     durations = [0.05, 0.2] if args.quick else [0.1, 0.4]
