@@ -38,6 +38,18 @@ def next_u64(state):
 
 
 @numba.njit(cache=True, inline="always")
+def mix64(z):
+    """SplitMix64's output function: the j-th draw after state s is ``mix64(s + j·GOLDEN_GAMMA)``.
+
+    Draws so addressed do not depend on each other, so a loop over them vectorises (same values as
+    :func:`next_u64` called j times).
+    """
+    z = (z ^ (z >> _S30)) * _MIX1
+    z = (z ^ (z >> _S27)) * _MIX2
+    return z ^ (z >> _S31)
+
+
+@numba.njit(cache=True, inline="always")
 def uniform(state):
     """(new state, u) with u uniform in [0, 1), 53-bit resolution."""
     state, z = next_u64(state)

@@ -370,3 +370,28 @@ def test_sparse_sampler_pixels_of_one_byte_keep_their_own_rates():
     assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
     byte_mean = np.repeat(expected.reshape(h, w // 8, 8).mean(axis=2), 8, axis=1)
     assert _chi2_ok(counts, byte_mean, n)[0] > 3 * bound
+
+
+def test_chunk_layout_weights_give_the_exact_gate_mean():
+    """Λ from the layout's keyframe weights equals q·(1/gate)·∫_gate Φ dt for every bin (inside a piece,
+    straddling one or several keyframes), across consecutive calls that share the keyframe ring."""
+    from simspad.sensors.spad.layout import KeyframeRing, chunk_layout
+
+    rng = np.random.default_rng(3)
+    knots_t = np.array([0.0, 13e-6, 20e-6, 23e-6, 61e-6, 200e-6])  # a gate (6 µs) can span three pieces
+    frames = rng.uniform(0.0, 1e15, (knots_t.size, 3, 5)).astype(np.float32)
+    tl = Timeline.from_arrays(knots_t, frames)
+    q, gate, bin_s = 2e-11, 6e-6, 2.5e-6
+    ring = KeyframeRing(tl, 3)  # fewer slots than one call needs: the ring grows
+    for k0 in (0, 20, 40):
+        starts = (k0 + np.arange(20)) * bin_s
+        lay = chunk_layout(ring, starts, gate, bin_s, q)
+        for j, s in enumerate(starts):
+            r = lay.bin_run[j]
+            terms = range(lay.term_ptr[r], lay.term_ptr[r + 1])
+            dk = j - lay.run_k0[r]
+            lam = sum((lay.term_c[t] + dk * lay.term_dc[t]) * lay.images[lay.term_img[t]].astype(np.float64)
+                      for t in terms)
+            exact = q * tl.integrate(float(s), float(s) + gate).astype(np.float64) / gate
+            assert np.allclose(lam, exact, rtol=1e-5), (k0, j)
+            assert set(lay.term_img[list(terms)]) <= set(lay.slots)  # the call's keyframes bound its gate means

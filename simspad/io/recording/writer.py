@@ -106,6 +106,8 @@ class Appender:
         self.n += data.shape[0]
         if self._pending_rows >= self.chunk_rows:
             self._write(final=False)
+        else:
+            self._pending[-1] = data.copy()  # kept past this call (less than a chunk): the caller may reuse its buffer
 
     def flush(self) -> None:
         """Write every buffered row (called by :class:`RecordingWriter` before closing)."""
@@ -118,12 +120,19 @@ class Appender:
         step = self.chunk_rows
         full = (rows.shape[0] // step) * step
         end = rows.shape[0] if final else full
+        # a whole chunk of an unfiltered numeric dataset goes to the file as it is (H5Dwrite_chunk): half the CPU
+        # time of a selection write, same bytes in the same place
+        direct = self.dataset.dtype.kind in "biuf" and self.dataset.id.get_create_plist().get_nfilters() == 0
         for i in range(0, end, step):
             block = rows[i : min(i + step, end)]
             self.dataset.resize(self._written + block.shape[0], axis=0)
-            self.dataset[self._written : self._written + block.shape[0]] = block
+            if direct and block.shape[0] == step:
+                self.dataset.id.write_direct_chunk((self._written,) + (0,) * (rows.ndim - 1),
+                                                   np.ascontiguousarray(block))
+            else:
+                self.dataset[self._written : self._written + block.shape[0]] = block
             self._written += block.shape[0]
-        rest = rows[end:]
+        rest = rows[end:].copy()  # less than a chunk, kept: a copy, so callers may reuse their buffers
         self._pending = [rest] if rest.shape[0] else []
         self._pending_rows = rest.shape[0]
 

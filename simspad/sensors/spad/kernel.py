@@ -12,8 +12,9 @@ probability bound p_max (the flux is piecewise linear, so its bounds sit on keyf
   and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
   terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
   among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel;
-- *dense*: bin by bin, one uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
-  multiplication per bin inside a linear piece (Λ is affine in k there); the byte is assembled in a register.
+- *dense*: bin by bin, one 32-bit uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
+  multiplication per bin inside a linear piece (Λ is affine in k there). A row's dense pixels are drawn in one
+  vectorised loop (SplitMix64 draws addressed by counter, half a draw per pixel), then packed into bytes.
 
 The random stream is a SplitMix64 generator (:mod:`simspad.physics.rng`) inside the numba kernel, seeded per
 kernel call from the caller's ``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for
@@ -30,42 +31,44 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from simspad.physics.rng import geometric, next_u64, uniform
+from simspad.physics.rng import GOLDEN_GAMMA, geometric, mix64, uniform
 
 #: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
 #: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
-#: benchmarks/bench_spad.py (a sparse detection costs ≈ 15× a dense bin; 0.02 and 0.05 were no faster).
+#: benchmarks/bench_spad.py (any value in 0.04–0.08 gave the same time at mean P(1) = 0.01 and 0.05).
 SPARSE_MAX_PROBABILITY = 0.08
 # The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
 _S32 = np.uint64(32)
 _M32 = np.uint64(0xFFFFFFFF)
-_INV32 = 1.0 / 4294967296.0
+_TWO32 = 4294967296.0
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
-#: Dense bytes run through all bins of a chunk in blocks of this many, so their state stays in L1 cache.
-_DENSE_BLOCK = 128
-#: Initial capacity of the secondary-detection buffer (it doubles when full).
-_EVENTS_CAPACITY = 1024
 
 
 class ChunkLayout(NamedTuple):
-    """Time structure of one kernel call: bins grouped in runs over which the gate-mean flux is affine.
+    """Time structure of one kernel call (:func:`simspad.sensors.spad.layout.chunk_layout`): bins grouped in runs
+    over which the gate-mean flux is affine in the bin index.
 
-    Bin k belongs to run ``r = bin_run[k]``; its gate-mean flux is ``A_r + (B_r − A_r)·bin_w[k]`` with
-    ``A_r = images[run_ia[r]]`` and ``B_r = images[run_ib[r]]``; w advances by ``run_dw[r]`` per bin.
+    Bin k belongs to run ``r = bin_run[k]``; its Λ without dark counts is
+    ``Σ_t (term_c[t] + (k − run_k0[r])·term_dc[t])·images[term_img[t]]`` over ``t`` in
+    ``term_ptr[r] … term_ptr[r+1]−1`` (coefficients in m² s: detection area × gate × weight).
     """
 
     images: np.ndarray
-    """[I, H, W] float32: sensor-plane photon irradiance, photons s⁻¹ m⁻²; they bound every gate mean."""
-    run_ia: np.ndarray
-    """[R] int64: index in ``images`` of each run's start image A_r."""
-    run_ib: np.ndarray
-    """[R] int64: index in ``images`` of each run's end image B_r."""
-    run_dw: np.ndarray
-    """[R] float64: increase of the weight w per bin inside each run."""
+    """[S, H, W] float32: sensor-plane photon irradiance of keyframes, photons s⁻¹ m⁻² (a ring of slots)."""
+    slots: np.ndarray
+    """[I] int64: the slots of ``images`` this call uses; they bound every gate mean of the call."""
+    run_k0: np.ndarray
+    """[R] int64: first bin of each run."""
+    term_ptr: np.ndarray
+    """[R+1] int64: each run's terms are ``term_ptr[r] … term_ptr[r+1]−1``."""
+    term_img: np.ndarray
+    """[T] int64: slot of each term's keyframe."""
+    term_c: np.ndarray
+    """[T] float64: coefficient of each term at its run's first bin, m² s."""
+    term_dc: np.ndarray
+    """[T] float64: increase of each term's coefficient per bin, m² s."""
     bin_run: np.ndarray
     """[m] int64: run of each bin."""
-    bin_w: np.ndarray
-    """[m] float64: weight of B_r in each bin's gate mean."""
 
 
 class PixelResponse(NamedTuple):
@@ -87,33 +90,30 @@ class PixelResponse(NamedTuple):
 
 @numba.njit(inline="always")
 def _push(events, n_events, k, y, x):
-    if n_events == events.shape[0]:
-        grown = np.empty((2 * events.shape[0], 3), np.int64)
-        grown[:n_events] = events[:n_events]
-        events = grown
-    events[n_events, 0] = k
-    events[n_events, 1] = y
-    events[n_events, 2] = x
-    return events, n_events + 1
+    """Store a secondary detection if the buffer has room; count it either way (the caller then re-runs)."""
+    if n_events < events.shape[0]:
+        events[n_events, 0] = k
+        events[n_events, 1] = y
+        events[n_events, 2] = x
+    return n_events + 1
 
 
 @numba.njit(inline="always")
-def _secondaries(state, pending, countdown, k, y, x, shape, response):
+def _secondaries(state, events, n_events, countdown, k, y, x, shape, response):
     """Afterpulse and crosstalk trials of the primary detection at bin k, pixel (y, x).
 
-    ``pending`` is the secondary-detection buffer ``(events [n, 3] int64 (bin, row, col), n_events)``;
+    ``events`` [capacity, 3] int64 (bin, row, col) is the secondary-detection buffer holding ``n_events``;
     ``countdown`` holds ``(ap_left, ct_left)``: running geometric countdowns, the failures before the next
     success of a stream of Bernoulli trials (1 afterpulse trial and 4 crosstalk trials per detection), so the
-    cost is a subtraction per detection, not 5 uniforms. Returns the updated ``(state, pending, countdown)``.
+    cost is a subtraction per detection, not 5 uniforms. Returns the updated ``(state, n_events, countdown)``.
     """
-    events, n_events = pending
     ap_left, ct_left = countdown
     H, W = shape
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
     if log1m_ap < 0.0:
         if ap_left == 0:
-            events, n_events = _push(events, n_events, k + 1, y, x)
+            n_events = _push(events, n_events, k + 1, y, x)
             state, ap_left = geometric(state, log1m_ap)
         else:
             ap_left -= 1
@@ -133,43 +133,59 @@ def _secondaries(state, pending, countdown, k, y, x, shape, response):
             else:
                 xx = x + 1
             if 0 <= yy < H and 0 <= xx < W:
-                events, n_events = _push(events, n_events, k, yy, xx)
+                n_events = _push(events, n_events, k, yy, xx)
             remaining -= ct_left + 1
             nb += 1
             state, ct_left = geometric(state, log1m_ct)
         ct_left -= remaining
-    return state, (events, n_events), (ap_left, ct_left)
+    return state, n_events, (ap_left, ct_left)
 
 
 @numba.njit(inline="always")
-def _lam(layout, k, y, x, q_gate, dark):
-    """Λ of bin k at pixel (y, x): the gate's mean flux is affine in w within the bin's run."""
+def _lam(layout, k, y, x, dark):
+    """Λ of bin k at pixel (y, x): the weighted sum of its run's keyframes, plus the dark term."""
     r = layout.bin_run[k]
-    a = float(layout.images[layout.run_ia[r], y, x])
-    lam = q_gate * (a + (float(layout.images[layout.run_ib[r], y, x]) - a) * layout.bin_w[k]) + dark
+    dk = float(k - layout.run_k0[r])
+    lam = dark
+    for t in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
+        lam += (layout.term_c[t] + dk * layout.term_dc[t]) * float(layout.images[layout.term_img[t], y, x])
     return lam if lam > 0.0 else 0.0
+
+
+@numba.njit(inline="always")
+def _store_row(out, row, y):
+    """``out[k, y, :] = row[k, :]`` for every bin k: each line written once, whole."""
+    for k in range(row.shape[0]):
+        for xb in range(row.shape[1]):
+            out[k, y, xb] = row[k, xb]
 
 
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
 # countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
 @numba.njit(cache=True)
-def spad_chunk(out, layout, response, seed):
-    """Primary bits of one chunk of ``m`` bins, OR-ed into ``out`` [H, m, ceil(W/8)] (row-major scratch).
+def spad_chunk(out, events, layout, response, seed):
+    """Primary bits of one chunk of ``m`` bins into ``out`` [m, H, ceil(W/8)] (every byte written).
 
-    Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a gate that
-    straddles a keyframe is a run of its own with A = B = its exact mean), so the images bound every gate mean
-    of the call.
+    Λ_k = q_gate·mean + dcr·gate_s exactly, with the gate-mean flux of :class:`ChunkLayout` (a weighted sum of
+    keyframes; a gate that straddles a keyframe is a run of its own), so the keyframes of the call bound every
+    gate mean.
 
     The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
-    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, assembled in a register, with
-    z = exp(−Λ) advanced by one multiplication per bin inside a run). The random stream is consumed in that
-    order: sparse bytes in raster order, then dense blocks.
+    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, with z = exp(−Λ) advanced by one
+    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's
+    sparse bytes in raster order, then its dense bytes.
 
     Parameters
     ----------
-    out : ndarray [H, m, ceil(W/8)] uint8
-        Packed bits, OR-ed into; rows outermost so that a pixel's bins lie in one contiguous span (the samplers
-        run pixel by pixel through time; bin-major writes would touch a page per bin). The caller transposes.
+    out : ndarray [m, H, ceil(W/8)] uint8
+        Packed bits in the recording's order. The samplers run pixel by pixel through time, so they write one
+        row of all bins at a time into an L1-resident [m, ceil(W/8)] buffer, which is then stored line by line.
+        (Written in place, a byte's bins lie H·ceil(W/8) bytes apart, a multiple of 4 KiB at common widths: they
+        map to the same cache sets and every write would miss.)
+    events : ndarray [capacity, 3] int64
+        Receives the secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as
+        (bin, row, col). A fixed buffer (no array is carried through the loops, which would cost reference
+        counting per detection); when it is too small the caller grows it and calls again with the same seed.
     layout : ChunkLayout
     response : PixelResponse
     seed : int
@@ -177,8 +193,8 @@ def spad_chunk(out, layout, response, seed):
 
     Returns
     -------
-    ndarray [n, 3] int64
-        Secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as (bin, row, col).
+    int
+        Number of secondary detections (those past ``capacity`` were not stored).
     """
     images = layout.images
     dcr = response.dcr_cps
@@ -186,7 +202,8 @@ def spad_chunk(out, layout, response, seed):
     gate_s = response.gate_s
     log1m_ap = response.log1m_afterpulse
     log1m_ct = response.log1m_crosstalk
-    m = out.shape[1]
+    m = out.shape[0]
+    slots = layout.slots
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
     Wb = (W + 7) // 8
@@ -198,15 +215,45 @@ def spad_chunk(out, layout, response, seed):
     if log1m_ct < 0.0:
         state, ct_left = geometric(state, log1m_ct)
     countdown = (ap_left, ct_left)
-    pending = (np.empty((_EVENTS_CAPACITY, 3), np.int64), np.int64(0))
+    n_events = np.int64(0)
     lam_dense = -math.log1p(-min(response.sparse_max_probability, 1.0 - 1e-12))
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
-    dense_y = np.empty(H * Wb, np.int64)
-    dense_b = np.empty(H * Wb, np.int64)
-    n_dense = 0
+    dense_b = np.empty(Wb, np.int64)
+    row_hi = np.empty(W, np.float32)
+    row = np.empty((m, Wb), np.uint8)  # one row of every bin: L1-resident while the samplers write it
+    row_lo = np.empty(W, np.float32)
+    lam_row = np.empty(W, np.float64)
+    slope_row = np.empty(W, np.float64)
+    # dense bytes of each row run through all bins right after the row's sparse bytes, into the same row buffer
+    bin_run = layout.bin_run
+    t_even = np.empty(4 * Wb, np.float64)
+    t_odd = np.empty(4 * Wb, np.float64)
+    f_even = np.empty(4 * Wb, np.float64)
+    f_odd = np.empty(4 * Wb, np.float64)
+    hit_even = np.empty(4 * Wb, np.uint8)
+    hit_odd = np.empty(4 * Wb, np.uint8)
+    gammas = np.empty(4 * Wb, np.uint64)
+    for q in range(4 * Wb):
+        gammas[q] = np.uint64(q + 1) * GOLDEN_GAMMA
     for y in range(H):
+        n_dense = 0
+        for k in range(m):
+            for xb in range(Wb):
+                row[k, xb] = 0
+        # the row's flux bounds over the call's keyframes, keyframe by keyframe (contiguous: the loops vectorise)
+        first = slots[0]
+        for x in range(W):
+            v = images[first, y, x]
+            row_hi[x] = v if v > 0.0 else np.float32(0.0)
+            row_lo[x] = v
+        for j in range(1, len(slots)):
+            i = slots[j]
+            for x in range(W):
+                v = images[i, y, x]
+                row_hi[x] = v if v > row_hi[x] else row_hi[x]
+                row_lo[x] = v if v < row_lo[x] else row_lo[x]
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
@@ -215,18 +262,13 @@ def spad_chunk(out, layout, response, seed):
                 lam_lo[bit] = 0.0
             for bit in range(x_end):
                 x = 8 * xb + bit
-                hi = 0.0
-                lo = np.inf
-                for i in range(images.shape[0]):
-                    v = float(images[i, y, x])
-                    hi = max(hi, v)
-                    lo = min(lo, v)
+                hi = float(row_hi[x])
+                lo = float(row_lo[x])
                 dark = float(dcr[y, x]) * gate_s
                 lam_hi[bit] = q_gate * hi + dark
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
                 hi_byte = max(hi_byte, lam_hi[bit])
             if hi_byte >= lam_dense:
-                dense_y[n_dense] = y
                 dense_b[n_dense] = xb
                 n_dense += 1
                 continue
@@ -264,62 +306,89 @@ def spad_chunk(out, layout, response, seed):
                         continue
                     x = 8 * xb + bit
                     if up >= lo_bound[bit]:
-                        lam = _lam(layout, k, y, x, q_gate, float(dcr[y, x]) * gate_s)
-                        if up >= -math.expm1(-lam):
+                        lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
+                        # p_k = 1 − e^(−Λ) lies in [Λ − Λ²/2, Λ]: the exponential only inside that band
+                        if up >= lam or (up >= lam * (1.0 - 0.5 * lam) and up >= -math.expm1(-lam)):
                             continue
-                    out[y, k, xb] |= np.uint8(1 << bit)
+                    row[k, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
-                        state, pending, countdown = _secondaries(state, pending, countdown, k, y, x, shape,
-                                                                 response)
+                        state, n_events, countdown = _secondaries(state, events, n_events, countdown, k, y, x,
+                                                                  shape, response)
                     else:
                         countdown = (ap_left - 1, ct_left - 4)
-    # blocks of dense bytes run through all bins while their state stays in L1 cache
-    bin_run = layout.bin_run
-    z = np.ones((_DENSE_BLOCK, 8), np.float64)  # z = 1: never a detection (pixels past the right edge)
-    ratio = np.ones((_DENSE_BLOCK, 8), np.float64)
-    for b0 in range(0, n_dense, _DENSE_BLOCK):
-        b1 = min(b0 + _DENSE_BLOCK, n_dense)
-        for k in range(m):
+        # the dense bytes' pixels as (even, odd) pairs: one 64-bit draw gives both their 32-bit uniforms, and
+        # the draws of a bin are addressed by counter (state + j·γ), so the loop over pairs vectorises
+        n_pairs = 4 * n_dense
+        for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
-                for i in range(b0, b1):
-                    y = dense_y[i]
-                    for bit in range(min(8, W - 8 * dense_b[i])):
+                # Λ and its slope for the whole row, term by term over contiguous pixels (vectorised)
+                dk = float(k - layout.run_k0[r])
+                for x in range(W):
+                    lam_row[x] = float(dcr[y, x]) * gate_s
+                    slope_row[x] = 0.0
+                for term in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
+                    c = layout.term_c[term] + dk * layout.term_dc[term]
+                    dc = layout.term_dc[term]
+                    img = layout.term_img[term]
+                    for x in range(W):
+                        v = float(images[img, y, x])
+                        lam_row[x] += c * v
+                        slope_row[x] += dc * v
+                for i in range(n_dense):
+                    for bit in range(8):
+                        q = 4 * i + (bit >> 1)
                         x = 8 * dense_b[i] + bit
-                        dark = float(dcr[y, x]) * gate_s
-                        z[i - b0, bit] = math.exp(-_lam(layout, k, y, x, q_gate, dark))
-                        a = float(images[layout.run_ia[r], y, x])
-                        slope = q_gate * (float(images[layout.run_ib[r], y, x]) - a) * layout.run_dw[r]
-                        ratio[i - b0, bit] = math.exp(-slope) if slope != 0.0 else 1.0
-            for i in range(b0, b1):
-                ii = i - b0
-                value = np.int64(0)
-                for bit in range(0, 8, 2):
-                    # two 32-bit uniforms per draw: p ≥ SPARSE_MAX_PROBABILITY here, so 2⁻³² resolution is ample
-                    state, w = next_u64(state)
-                    u0 = float(w & _M32) * _INV32
-                    u1 = float(w >> _S32) * _INV32
-                    z0 = z[ii, bit]
-                    z1 = z[ii, bit + 1]
-                    z[ii, bit] = z0 * ratio[ii, bit]
-                    z[ii, bit + 1] = z1 * ratio[ii, bit + 1]
-                    # branch-free: at p ~ 0.5 a data-dependent branch mispredicts every other pixel
-                    value |= (np.int64(u0 >= z0) << bit) | (np.int64(u1 >= z1) << (bit + 1))
-                out[dense_y[i], k, dense_b[i]] |= np.uint8(value)
+                        t = _TWO32  # z = 1 past the right edge: never a detection
+                        f = 1.0
+                        if x < W:
+                            t = _TWO32 * math.exp(-max(lam_row[x], 0.0))
+                            slope = slope_row[x]
+                            f = math.exp(-slope) if slope != 0.0 else 1.0
+                        if bit & 1:
+                            t_odd[q] = t
+                            f_odd[q] = f
+                        else:
+                            t_even[q] = t
+                            f_even[q] = f
+            # bit = 1 when u < 1 − z, i.e. u·2³² ≥ z·2³² = t (exact: a power-of-two scale); t advances by one
+            # multiplication per bin inside a run
+            total = np.int64(0)
+            for q in range(n_pairs):
+                w = mix64(state + gammas[q])
+                he = float(np.int64(w & _M32)) >= t_even[q]
+                ho = float(np.int64(w >> _S32)) >= t_odd[q]
+                hit_even[q] = he
+                hit_odd[q] = ho
+                total += np.int64(he) + np.int64(ho)
+                t_even[q] *= f_even[q]
+                t_odd[q] *= f_odd[q]
+            state += np.uint64(n_pairs) * GOLDEN_GAMMA
+            ap_left, ct_left = countdown
+            quiet = ap_left >= total and ct_left >= 4 * total  # no secondary due in this row of this bin
+            if quiet:
+                countdown = (ap_left - total, ct_left - 4 * total)
+            for i in range(n_dense):
+                q = 4 * i
+                value = np.int64(hit_even[q] | (hit_odd[q] << 1) | (hit_even[q + 1] << 2) | (hit_odd[q + 1] << 3)
+                                 | (hit_even[q + 2] << 4) | (hit_odd[q + 2] << 5) | (hit_even[q + 3] << 6)
+                                 | (hit_odd[q + 3] << 7))
+                row[k, dense_b[i]] = np.uint8(value)
+                if quiet:
+                    continue
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
                     for bit in range(8):
                         if (value >> bit) & 1:
-                            state, pending, countdown = _secondaries(state, pending, countdown, k, dense_y[i],
-                                                                     8 * dense_b[i] + bit, shape, response)
+                            state, n_events, countdown = _secondaries(state, events, n_events, countdown, k,
+                                                                      y, 8 * dense_b[i] + bit, shape,
+                                                                      response)
                 else:
                     countdown = (ap_left - count, ct_left - 4 * count)
-        z[:] = 1.0
-        ratio[:] = 1.0
-    events, n_events = pending
-    return events[:n_events]
+        _store_row(out, row, y)
+    return n_events
 
 
 @numba.njit(cache=True)

@@ -17,17 +17,19 @@ from tqdm import tqdm
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad.kernel import (
     SPARSE_MAX_PROBABILITY,
-    ChunkLayout,
     PixelResponse,
     apply_events,
     spad_chunk,
 )
+from simspad.sensors.spad.layout import KeyframeRing, chunk_layout
 from simspad.sensors.spad.model import dcr_map, n_bins, resolve_gate, spad_attrs, validate_params
 
 #: Target size of one streamed chunk of packed bits (bytes); bounds memory whatever the duration.
 CHUNK_BYTES = 16 << 20
 MIN_CHUNK_BINS = 64
 MAX_CHUNK_BINS = 8192
+#: Initial capacity of the secondary-detection buffer of a kernel call (grown when a call finds more).
+EVENTS_CAPACITY = 4096
 #: Keyframes one kernel call may span (bounds the images held per call whatever the keyframe rate).
 MAX_KEYFRAMES_PER_CALL = 16
 
@@ -68,22 +70,30 @@ class SpadChunker:
                                       sparse_max_probability=SPARSE_MAX_PROBABILITY,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
-        self._rows = None
+        self._events = np.empty((EVENTS_CAPACITY, 3), np.int64)
+        # a call touches at most MAX_KEYFRAMES_PER_CALL + 1 keyframes (the one before its first bin included)
+        self._ring = KeyframeRing(flux_tl, MAX_KEYFRAMES_PER_CALL + 1)
         self.n_detections_secondary = 0
 
     def chunk(self, k0: int, m: int, out: np.ndarray | None = None) -> np.ndarray:
-        """Packed bits of bins ``k0 … k0+m−1`` as ``[m, H, ceil(W/8)]`` uint8. Call with consecutive ``k0``."""
+        """Packed bits of bins ``k0 … k0+m−1`` as ``[m, H, ceil(W/8)]`` uint8. Call with consecutive ``k0``.
+
+        ``out``, when given with that shape, is overwritten and returned.
+        """
         H, W = self.tl.height, self.tl.width
         shape = (m, H, (W + 7) // 8)
         if out is None or out.shape != shape:
-            out = np.empty(shape, np.uint8)  # every bin is overwritten by its sub-chunk's transpose
+            out = np.empty(shape, np.uint8)  # the kernel writes every byte
         found = []
         for j0, n in self._sub_chunks(k0, m):
-            layout = self._layout(k0 + j0, n)
+            starts = self.t0 + (k0 + j0 + np.arange(n)) * self.bin_s
+            layout = chunk_layout(self._ring, starts, self.gate_s, self.bin_s, self.q_gate)
             seed = int(self.rng.integers(0, 2**63))
-            rows = self._scratch((H, n, shape[2]))
-            events = spad_chunk(rows, layout, self.response, seed)
-            out[j0 : j0 + n] = rows.transpose(1, 0, 2)
+            n_events = spad_chunk(out[j0 : j0 + n], self._events, layout, self.response, seed)
+            if n_events > len(self._events):  # the buffer was short: grow it and draw the same bits again
+                self._events = np.empty((2 * n_events, 3), np.int64)
+                n_events = spad_chunk(out[j0 : j0 + n], self._events, layout, self.response, seed)
+            events = self._events[:n_events].copy()
             events[:, 0] += j0
             found.append(events)
         events = np.concatenate(found)
@@ -96,19 +106,11 @@ class SpadChunker:
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out
 
-    def _scratch(self, shape: tuple) -> np.ndarray:
-        """A zeroed row-major buffer [H, n, ceil(W/8)] for the kernel, reused between calls of the same shape."""
-        if self._rows is None or self._rows.shape != shape:
-            self._rows = np.zeros(shape, np.uint8)
-        else:
-            self._rows.fill(0)
-        return self._rows
-
     def _sub_chunks(self, k0: int, m: int):
         """Split bins so that no kernel call spans more than :data:`MAX_KEYFRAMES_PER_CALL` keyframes.
 
-        The kernel holds two images per linear piece; dense keyframes (fast motion) would otherwise make that
-        grow with the keyframe rate.
+        The kernel holds the keyframes of a call in a ring of slots; dense keyframes (fast motion) would otherwise
+        make that grow with the keyframe rate.
         """
         times = self.tl.times_s
         j0 = 0
@@ -122,91 +124,6 @@ class SpadChunker:
                 n = int(np.clip(math.floor((t_limit - self.gate_s - t_a) / self.bin_s) + 1, 1, m - j0))
             yield j0, n
             j0 += n
-
-    def _layout(self, k0: int, m: int) -> ChunkLayout:
-        """Arrays of one kernel call: images [I,H,W], run_ia, run_ib, run_dw [R], bin_run, bin_w [m].
-
-        Consecutive pieces share their end images (the same array objects), so each is stacked once. Every gate
-        mean lies between the images of its run (a straddling gate's exact mean is an image of its own), so the
-        images bound the flux of the call.
-        """
-        runs = list(self._runs(k0, m))
-        images, index = [], {}
-
-        def image_index(a):
-            key = id(a)
-            if key not in index:
-                index[key] = len(images)
-                images.append(a)
-            return index[key]
-
-        run_ia = np.empty(len(runs), np.int64)
-        run_ib = np.empty(len(runs), np.int64)
-        run_dw = np.empty(len(runs), np.float64)
-        bin_run = np.empty(m, np.int64)
-        bin_w = np.empty(m, np.float64)
-        for i, (j0, n, ya, yb, w0, dw, _) in enumerate(runs):
-            run_ia[i] = image_index(ya)
-            run_ib[i] = image_index(yb)
-            run_dw[i] = dw
-            bin_run[j0 : j0 + n] = i
-            bin_w[j0 : j0 + n] = w0 + dw * np.arange(n)
-        stacked = np.stack(images).astype(np.float32, copy=False)
-        return ChunkLayout(images=stacked, run_ia=run_ia, run_ib=run_ib, run_dw=run_dw, bin_run=bin_run,
-                           bin_w=bin_w)
-
-    def _runs(self, k0: int, m: int):
-        """Yield (j0, n, ya, yb, w0, dw, is_piece): runs of bins whose gates lie in one linear piece, or one
-        straddling bin (``is_piece`` False, ya = yb = its exact gate mean)."""
-        bin_s, gate = self.bin_s, self.gate_s
-        t_first = self.t0 + k0 * bin_s
-        t_last_end = self.t0 + (k0 + m - 1) * bin_s + gate
-        pieces = list(self.tl.segments(t_first, t_last_end))
-        if not pieces:  # a single keyframe: constant in time
-            y = self.tl.sample(t_first)
-            yield 0, m, y, y, 0.0, 0.0, True
-            return
-        tol = 1e-6 * gate
-        starts = self.t0 + (k0 + np.arange(m)) * bin_s
-        ta = np.array([p[0] for p in pieces])
-        tb = np.array([p[1] for p in pieces])
-        idx = np.clip(np.searchsorted(ta, starts + tol, side="right") - 1, 0, len(pieces) - 1)
-        inside = starts + gate <= tb[idx] + tol
-        j = 0
-        while j < m:
-            i = idx[j]
-            if not inside[j]:
-                y = _gate_mean(pieces, float(starts[j]), gate)
-                yield j, 1, y, y, 0.0, 0.0, False
-                j += 1
-                continue
-            e = j + 1
-            while e < m and inside[e] and idx[e] == i:
-                e += 1
-            a, b, ya, yb = pieces[i]
-            span = b - a
-            w0 = (starts[j] + 0.5 * gate - a) / span
-            dw = bin_s / span
-            yield j, e - j, ya, yb, float(w0), float(dw), True
-            j = e
-
-
-def _gate_mean(pieces, t: float, gate: float) -> np.ndarray:
-    """Exact mean over the gate ``[t, t + gate]`` of the piecewise-linear flux given by ``pieces``.
-
-    Each piece ``(a, b, ya, yb)`` it overlaps on ``[lo, hi]`` contributes ``(hi − lo)`` times its value at the
-    overlap's midpoint (exact for a linear function), as a weighted sum of the piece's end images: a few
-    multiply-adds per pixel, where a general ``Timeline.integrate`` interpolates and converts whole images.
-    """
-    total = None
-    for a, b, ya, yb in pieces:
-        lo, hi = max(t, a), min(t + gate, b)
-        if hi <= lo:
-            continue
-        w = (0.5 * (lo + hi) - a) / (b - a)
-        term = ya * np.float32((hi - lo) * (1.0 - w) / gate) + yb * np.float32((hi - lo) * w / gate)
-        total = term if total is None else total + term
-    return total
 
 
 def h5_chunk_bins(height: int, width: int) -> int:
@@ -264,11 +181,12 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)))
     chunker = SpadChunker(flux_tl, t0, n, resolved, dcr, rng)
     bar = tqdm(total=n, unit="bin", desc="spad", leave=False) if progress else None
+    buffer = None
     for k0 in range(0, n, m):
         mm = min(m, n - k0)
-        # a fresh array per chunk: the appender may keep a view of the rows short of a whole HDF5 chunk until
-        # the next append, so a reused buffer would overwrite them (m need not be a multiple of its chunk rows)
-        bits.append(chunker.chunk(k0, mm))
+        # one buffer for every chunk (the appender copies the rows it keeps): no fresh pages to fault in
+        buffer = chunker.chunk(k0, mm, out=buffer)
+        bits.append(buffer)
         t_start.append(t0 + (k0 + np.arange(mm)) * params.bin_s)
         if bar is not None:
             bar.update(mm)
