@@ -13,7 +13,7 @@ For each recording × method (a *task*), following the protocol of :mod:`simspad
    fixed frequencies and MTF50 (:func:`simspad.evaluate.protocol.star_figures`);
 5. the method's bandwidth is read from the reconstruction once it has been iterated.
 
-Tasks run in a process pool of at most 2 workers (``spawn``), one recording's methods per job so that its ground
+Tasks run in a process pool of at most 2 workers (forked where safe, else spawned), one recording's methods per job so that its ground
 truth is read, display-mapped and (Siemens star) analysed once for all of them
 (:class:`simspad.evaluate.protocol.GroundTruthCache`); rows come out in a deterministic order (recordings in
 manifest/sorted order, methods in the requested order) whatever finishes first. A progress bar counts method
@@ -31,6 +31,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import sys
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -192,6 +193,20 @@ def _batches(tasks: list[Task], workers: int) -> list[list[Task]]:
     return groups
 
 
+def _start_method() -> str:
+    """How pool workers start: ``fork`` where it is safe, else ``spawn``.
+
+    A forked worker starts with this process's imports (numpy, scipy, h5py, numba and the methods: ≈ 2 s of CPU
+    that every spawned worker spends again, as long as a small dataset's whole evaluation). Forking is safe when
+    this process runs no other thread (a lock held by one would stay locked in the child) and holds no renderer
+    state (``simspad generate`` evaluates after Mitsuba has started its own native threads); then spawn.
+    """
+    if ("fork" in mp.get_all_start_methods() and threading.active_count() == 1
+            and not any(m in sys.modules for m in ("mitsuba", "drjit", "distributed"))):
+        return "fork"
+    return "spawn"
+
+
 def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = True) -> list[dict]:
     """Run tasks (process pool of ≤ 2 workers when there is more than one task); results in task order.
 
@@ -200,6 +215,17 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
     workers = min(MAX_WORKERS, len(tasks), workers or os.cpu_count() or 1)
     batches = _batches(tasks, workers)
     results: list[list[dict] | None] = [None] * len(batches)
+    pool = futures = None
+    if workers > 1:
+        # Workers start before the progress bar, whose monitor thread would make forking unsafe.
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(_start_method()),
+                                   initializer=die_with_parent_and_ignore_sigint)
+        try:
+            with sigint_blocked():  # workers start deaf to Ctrl-C: the driver alone reports it
+                futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
+        except BaseException:
+            kill_pool_workers(pool)
+            raise
     with tqdm(total=len(tasks), desc="evaluate", unit="run", file=sys.stderr, dynamic_ncols=True,
               disable=not progress) as bar:
         def done(i: int, out: list[dict]) -> None:
@@ -207,15 +233,11 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
             bar.set_postfix_str(batches[i][0].entry.key, refresh=False)
             bar.update(len(out))
 
-        if workers <= 1:
+        if pool is None:
             for i, b in enumerate(batches):
                 done(i, run_recording(b))
         else:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                       initializer=die_with_parent_and_ignore_sigint)
             try:
-                with sigint_blocked():  # workers start deaf to Ctrl-C: the driver alone reports it
-                    futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
                 for fut in as_completed(futures):
                     done(futures[fut], fut.result())
             except BaseException:

@@ -22,6 +22,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from simspad.physics.pairwise_sum import pairwise_sum
+
 
 @numba.njit(cache=True, inline="always")
 def _node(i, n):
@@ -185,74 +187,6 @@ def _gradient(a, axis, out):
 
 
 @numba.njit(cache=True)
-def _pairwise_block(a, lo, n):
-    # NumPy's pairwise summation of at most 128 values: sequential below 8, else eight interleaved partial sums.
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += a[i]
-        return res
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    i = 8
-    while i + 8 <= n:
-        j = lo + i
-        r0 += a[j]
-        r1 += a[j + 1]
-        r2 += a[j + 2]
-        r3 += a[j + 3]
-        r4 += a[j + 4]
-        r5 += a[j + 5]
-        r6 += a[j + 6]
-        r7 += a[j + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return res
-
-
-@numba.njit(cache=True)
-def _pairwise_sum(a, lo, n):
-    """NumPy's pairwise sum of ``a[lo:lo + n]`` (what ``sum`` does along a contiguous axis): blocks of at most 128
-    values, longer runs split in halves (the first a multiple of 8) and the halves' sums added. The halving runs
-    on an explicit stack: numba functions that call themselves crash when loaded from numba's cache."""
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    depth = 64
-    los = np.empty(depth, np.int64)
-    ns = np.empty(depth, np.int64)
-    left = np.empty(depth)
-    stage = np.zeros(depth, np.int64)  # 0: left half pending, 1: right half pending
-    top = 0
-    los[0], ns[0], stage[0] = lo, n, 0
-    val = 0.0
-    while True:
-        m = ns[top]
-        if m <= 128:
-            val = _pairwise_block(a, los[top], m)
-            top -= 1
-            # hand the value to the parents until one still has its right half to do
-            while top >= 0 and stage[top] == 1:
-                val = left[top] + val
-                top -= 1
-            if top < 0:
-                return val
-            left[top] = val
-            stage[top] = 1
-            half = ns[top] // 2
-            half -= half % 8
-            los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, ns[top] - half, 0
-            top += 1
-        else:
-            half = m // 2
-            half -= half % 8
-            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
-            top += 1
-
-
-@numba.njit(cache=True)
 def lucas_kanade_tiles(ref, img, gy_ref, gx_ref, flow_y, flow_x, tile, iterations):
     """Lucas–Kanade refinement of a per-tile flow [ny, nx] (in place) such that ``img(p + f) ≈ ref(p)``.
 
@@ -299,7 +233,7 @@ def lucas_kanade_tiles(ref, img, gy_ref, gx_ref, flow_y, flow_x, tile, iteration
                         rows[3, k] = gy * it
                         rows[4, k] = gx * it
                     for q in range(5):
-                        sums[q] += _pairwise_sum(rows[q], 0, tile)
+                        sums[q] += pairwise_sum(rows[q], 0, tile)
                 a11, a12, a22, b1, b2 = sums[0], sums[1], sums[2], sums[3], sums[4]
                 det = a11 * a22 - a12 * a12
                 if det > 1e-9 * (a11 + a22) ** 2 + 1e-30:
