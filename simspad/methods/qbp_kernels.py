@@ -114,32 +114,35 @@ def subpixel_median(d, cost):
 
 
 @numba.njit(cache=True)
-def _uniform_lines(src, dst, size):
-    # SciPy's uniform_filter1d along the last axis of 2-D ``src``: running sum over the line padded with its
-    # edge values (entering − leaving at each step), divided by size at each output.
-    n_lines, n = src.shape
-    s1 = size // 2
-    line = np.empty(n + size - 1)
-    for i in range(n_lines):
-        for k in range(n + size - 1):
-            line[k] = src[i, min(max(k - s1, 0), n - 1)]
-        t = 0.0
-        for k in range(size):
-            t += line[k]
-        dst[i, 0] = t / size
-        for k in range(1, n):
-            t += line[k + size - 1] - line[k - 1]
-            dst[i, k] = t / size
-
-
-@numba.njit(cache=True)
 def uniform_filter_nearest(a, size):
-    """Box mean of side ``size`` with edge samples repeated (``ndimage.uniform_filter(a, size, mode="nearest")``):
-    axis 0, then axis 1."""
-    tmp = np.empty((a.shape[1], a.shape[0]))
-    _uniform_lines(a.T.copy(), tmp, size)
-    out = np.empty(a.shape)
-    _uniform_lines(tmp.T.copy(), out, size)
+    """Box mean of side ``size`` with edge samples repeated (``ndimage.uniform_filter(a, size, mode="nearest")``),
+    SciPy's running sum: along axis 0, then axis 1, the first ``size`` samples of the extended line added in
+    order, then the entering minus the leaving sample at each step, each output that sum divided by ``size``."""
+    H, W = a.shape
+    s1 = size // 2
+    tmp = np.empty((H, W))
+    t = np.zeros(W)
+    for k in range(size):
+        r = min(max(k - s1, 0), H - 1)
+        for x in range(W):
+            t[x] += a[r, x]
+    for x in range(W):
+        tmp[0, x] = t[x] / size
+    for y in range(1, H):
+        enter = min(max(y + size - 1 - s1, 0), H - 1)
+        leave = min(max(y - 1 - s1, 0), H - 1)
+        for x in range(W):
+            t[x] += a[enter, x] - a[leave, x]
+            tmp[y, x] = t[x] / size
+    out = np.empty((H, W))
+    for y in range(H):
+        v = 0.0
+        for k in range(size):
+            v += tmp[y, min(max(k - s1, 0), W - 1)]
+        out[y, 0] = v / size
+        for x in range(1, W):
+            v += tmp[y, min(max(x + size - 1 - s1, 0), W - 1)] - tmp[y, min(max(x - 1 - s1, 0), W - 1)]
+            out[y, x] = v / size
     return out
 
 
@@ -217,12 +220,14 @@ def lucas_kanade_tiles(ref, img, gy_ref, gx_ref, flow_y, flow_x, tile, iteration
         _gradient(w, 1, gwx)
         for i in range(ny):
             for j in range(nx):
-                sums[:] = 0.0
+                for q in range(5):
+                    sums[q] = 0.0
                 for y in range(i * tile, min((i + 1) * tile, H)):
                     for k in range(tile):
                         x = j * tile + k
                         if x >= W:
-                            rows[:, k] = 0.0
+                            for q in range(5):
+                                rows[q, k] = 0.0
                             continue
                         gy = 0.5 * (gwy[y, x] + gy_ref[y, x]) * inside[y, x]
                         gx = 0.5 * (gwx[y, x] + gx_ref[y, x]) * inside[y, x]
