@@ -180,7 +180,12 @@ def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float | None = None) 
     """
     if white is None:
         white = white_point(gt)
-    x = _log_floored(rec, log_floor_rec(rec)).ravel()
+    return _fit_log(_log_floored(rec, log_floor_rec(rec)), gt, white)
+
+
+def _fit_log(x: np.ndarray, gt: np.ndarray, white: float) -> tuple[float, float]:
+    """:func:`affine_log_fit` given the floored log of the reconstruction ``x``."""
+    x = x.ravel()
     y = _log_floored(gt, LOG_FLOOR_REL * white).ravel()
     xm, ym = x.mean(), y.mean()
     dx = x - xm
@@ -191,8 +196,8 @@ def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float | None = None) 
 
 def align_log_affine(rec: np.ndarray, gt: np.ndarray, white: float) -> np.ndarray:
     """The reconstruction after the per-frame log-space affine fit: exp(a·ln(rec) + b), float32."""
-    a, b = affine_log_fit(rec, gt, white)
     x = _log_floored(rec, log_floor_rec(rec))
+    a, b = _fit_log(x, gt, white)
     return np.exp(a * x + b).astype(np.float32)
 
 
@@ -234,8 +239,9 @@ def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: 
     rec = np.asarray(rec, dtype=np.float64)
     a = b = float("nan")
     if not absolute_scale:
-        a, b = affine_log_fit(rec, gt, white)
-        rec = np.exp(a * _log_floored(rec, log_floor_rec(rec)) + b)
+        x = _log_floored(rec, log_floor_rec(rec))  # floor and logarithm taken once for the fit and its use
+        a, b = _fit_log(x, gt, white)
+        rec = np.exp(a * x + b)
     rd = display_map(rec, white)
     gd = display_map(gt, white) if gt_display is None else gt_display
     return {"psnr_db": psnr_db(rd, gd), "ssim": ssim(rd, gd), "fit_a": a, "fit_b": b}
