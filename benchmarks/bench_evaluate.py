@@ -71,14 +71,23 @@ def subset(dataset: Path, n: int, dest: Path) -> list[Path]:
 
 
 def compare(a: Path, b: Path) -> str:
-    """Whether two results.csv agree on the columns both have, ``runtime_s`` aside."""
+    """Whether two results.csv agree on the columns both have, ``runtime_s`` aside; where they do not, the
+    largest difference of PSNR (dB) and the columns that differ."""
     def rows(p):
         with open(p, newline="", encoding="utf-8") as f:
             return list(csv.DictReader(f))
     ra, rb = rows(a), rows(b)
     common = [c for c in ra[0] if c in rb[0] and c not in ("runtime_s", "mtf50_cyc_px")] if ra and rb else []
     same = len(ra) == len(rb) and all(x[c] == y[c] for x, y in zip(ra, rb) for c in common)
-    return f"{len(ra)} rows, {len(common)} common columns {'identical' if same else 'DIFFERENT'}"
+    out = f"{len(ra)} rows, {len(common)} common columns {'identical' if same else 'DIFFERENT'}"
+    if not same and len(ra) == len(rb):
+        differing = sorted({c for x, y in zip(ra, rb) for c in common if x[c] != y[c]})
+        d_psnr = [abs(float(x["psnr_db"]) - float(y["psnr_db"])) for x, y in zip(ra, rb)
+                  if "psnr_db" in common and x["psnr_db"] and y["psnr_db"]]
+        methods = sorted({x["method"] for x, y in zip(ra, rb) for c in common if x[c] != y[c]})
+        out += (f" (columns {', '.join(differing)}; methods {', '.join(methods)}; "
+                f"max |dPSNR| {max((d for d in d_psnr if d == d), default=0.0):.3g} dB)")
+    return out
 
 
 def main() -> None:

@@ -218,8 +218,11 @@ def export(recording, fmt, out_path, packing, frames_format):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit."""
-    with first_sigint_only():  # a second Ctrl-C must not break into the clean-up of the first
+    with first_sigint_only() as sigint:  # a second Ctrl-C must not break into the clean-up of the first
         code = _main(argv)
+    if sigint.interrupted and code != 130:  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
+        click.echo("simspad: interrupted", err=True)
+        code = 130
     writer = sys.modules.get("simspad.io.recording.writer")
     if writer is not None and writer.hdf5_close_failed():
         # A close failed on a full disk: HDF5 would crash retrying it at exit (SIGSEGV); the temporary file is

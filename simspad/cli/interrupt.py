@@ -10,32 +10,48 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 from typing import Iterator
 
 
+class SigintState:
+    """Whether a SIGINT arrived (``interrupted``): the caller ends the run as interrupted even when the
+    ``KeyboardInterrupt`` was swallowed where it was raised."""
+
+    interrupted = False
+
+
 @contextlib.contextmanager
-def first_sigint_only() -> Iterator[None]:
+def first_sigint_only() -> Iterator[SigintState]:
     """Turn the first SIGINT into ``KeyboardInterrupt`` and ignore every later one.
 
     Without an interrupt the previous handler is restored on exit (``main`` is also called inside test
-    processes). Where SIGINT was already ignored (a background job) or outside the main thread, a no-op.
+    processes). A ``KeyboardInterrupt`` that Python swallows (raised inside a weakref callback or a ``__del__``,
+    where it is only reported) is not reported; the state yielded says that SIGINT arrived. Where SIGINT was already ignored (a background job) or outside the main thread, a no-op.
     """
+    state = SigintState()
     previous = signal.getsignal(signal.SIGINT)
     if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
-        yield
+        yield state
         return
-    interrupted = False
 
     def on_sigint(signum, frame):
-        nonlocal interrupted
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        interrupted = True
+        state.interrupted = True
         raise KeyboardInterrupt
 
+    def unraisable(info) -> None:
+        # A SIGINT landing in a weakref callback or a __del__ raises there, where Python only reports it: silent
+        if not issubclass(info.exc_type, KeyboardInterrupt):
+            previous_hook(info)
+
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = unraisable
     signal.signal(signal.SIGINT, on_sigint)
     try:
-        yield
+        yield state
     finally:
-        if not interrupted:
+        sys.unraisablehook = previous_hook
+        if not state.interrupted:
             signal.signal(signal.SIGINT, previous)

@@ -13,7 +13,7 @@ For each recording × method (a *task*), following the protocol of :mod:`simspad
    fixed frequencies and MTF50 (:func:`simspad.evaluate.protocol.star_figures`);
 5. the method's bandwidth is read from the reconstruction once it has been iterated.
 
-Tasks run in a process pool of at most 2 workers (``spawn``), one recording's methods per job so that its ground
+Tasks run in a process pool of at most 2 workers (forked where safe, else spawned), one recording's methods per job so that its ground
 truth is read, display-mapped and (Siemens star) analysed once for all of them
 (:class:`simspad.evaluate.protocol.GroundTruthCache`); rows come out in a deterministic order (recordings in
 manifest/sorted order, methods in the requested order) whatever finishes first. A progress bar counts method
@@ -31,12 +31,14 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import sys
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from simspad import __version__
@@ -66,6 +68,7 @@ from simspad.io.results_dir import (
 )
 from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, get_method
+from simspad.physics.pairwise_sum import pairwise_sum
 
 MAX_WORKERS = 2
 
@@ -96,62 +99,66 @@ def _base_row(task: Task, white: float) -> dict:
             "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": ""}
 
 
-def run_task(task: Task, gt_cache: GroundTruthCache | None = None) -> dict:
+def run_task(task: Task, gt_cache: GroundTruthCache | None = None, rec=None) -> dict:
     """Run one method on one recording and score it; never raises for a method failure (see module doc).
 
-    ``gt_cache`` (optional) shares the recording's ground truth with the other methods scored on it. The output
-    holds ``seconds``, the task's wall time (method, scoring and writing).
+    ``gt_cache`` (optional) shares the recording's ground truth with the other methods scored on it, ``rec``
+    (optional) the open recording (else it is opened here). The output holds ``seconds``, the task's wall time
+    (method, scoring and writing).
     """
     start = time.perf_counter()
-    out = _run_task(task, gt_cache)
+    if rec is None:
+        with open_recording(task.entry.path) as rec:
+            out = _run_task(task, gt_cache, rec)
+    else:
+        out = _run_task(task, gt_cache, rec)
     out["seconds"] = time.perf_counter() - start
     return out
 
 
-def _run_task(task: Task, gt_cache: GroundTruthCache | None) -> dict:
+def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
     e = task.entry
-    with open_recording(e.path) as rec:
-        idx = evaluation_indices(rec.gt.t, task.rate_hz)
-        white = task.white if task.white is not None else gt_white_point(rec, idx)
-        row = _base_row(task, white)
-        out = {"row": row, "frame_rows": [], "mtf_rows": []}
+    idx = evaluation_indices(rec.gt.t, task.rate_hz)
+    white = task.white if task.white is not None else gt_white_point(rec, idx)
+    row = _base_row(task, white)
+    out = {"row": row, "frame_rows": [], "mtf_rows": []}
+    try:
+        method = get_method(task.method)
+        row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
+        missing = [k for k in method.requires if not rec.has(k)]
+        if missing:
+            raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
+        times = rec.gt.t[idx]
+        sink = None
+        if task.save_reconstructions:
+            sink = ReconstructionSink(task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5",
+                                      times, (rec.height, rec.width),
+                                      {"method": task.method, "recording": e.rel, "units": "photons s-1 m-2"})
         try:
-            method = get_method(task.method)
-            row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
-            missing = [k for k in method.requires if not rec.has(k)]
-            if missing:
-                raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
-            times = rec.gt.t[idx]
-            sink = None
-            if task.save_reconstructions:
-                sink = ReconstructionSink(task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5",
-                                          times, (rec.height, rec.width),
-                                          {"method": task.method, "recording": e.rel, "units": "photons s-1 m-2"})
-            try:
-                reco = method.reconstruct(rec, times)
-                run = ScoringRun(method=task.method, recording=e.rel, scene=e.scene, white=white,
-                                 absolute_scale=method.absolute_scale, image_frame=idx.size // 2)
-                res = score_frames(rec, idx, reco, run, frame_sink=sink, gt_cache=gt_cache)
-            finally:
-                if sink is not None:
-                    sink.close()
-            bw = reco.bandwidth
-            row.update(psnr_db=res["psnr_db"], ssim=res["ssim"], n_frames=res["n_frames"],
-                       runtime_s=round(res["method_s"], 3),
-                       bandwidth_khz_per_pixel=float(bw.readout_khz_per_pixel),
-                       bandwidth_bits_per_pixel_s=float(bw.bits_per_pixel_s))
-            if res["images"] is not None:
-                row["image"] = write_images(task.work_dir, e.key, task.method, res["images"])
-            if res["mtf"] is not None:
-                f, m = res["mtf"]
-                row.update(star_figures(res["mtf"]))
-                out["mtf_rows"] = [{"method": task.method, "recording": e.rel, "freq_cyc_px": float(a),
-                                    "mtf": float(b)} for a, b in zip(f, m)]
-            out["frame_rows"] = res["frame_rows"]
-        except Exception as exc:  # a method's failure is a result, not the end of the run
-            row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-            (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
-        return out
+            reco = method.reconstruct(rec, times)
+            run = ScoringRun(method=task.method, recording=e.rel, scene=e.scene, white=white,
+                             absolute_scale=method.absolute_scale, image_frame=idx.size // 2)
+            res = score_frames(rec, idx, reco, run, frame_sink=sink, gt_cache=gt_cache)
+        finally:
+            if sink is not None:
+                sink.close()
+        bw = reco.bandwidth
+        row.update(psnr_db=res["psnr_db"], ssim=res["ssim"], n_frames=res["n_frames"],
+                   runtime_s=round(res["method_s"], 3),
+                   bandwidth_khz_per_pixel=float(bw.readout_khz_per_pixel),
+                   bandwidth_bits_per_pixel_s=float(bw.bits_per_pixel_s))
+        if res["images"] is not None:
+            row["image"] = write_images(task.work_dir, e.key, task.method, res["images"])
+        if res["mtf"] is not None:
+            f, m = res["mtf"]
+            row.update(star_figures(res["mtf"]))
+            out["mtf_rows"] = [{"method": task.method, "recording": e.rel, "freq_cyc_px": float(a),
+                                "mtf": float(b)} for a, b in zip(f, m)]
+        out["frame_rows"] = res["frame_rows"]
+    except Exception as exc:  # a method's failure is a result, not the end of the run
+        row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+        (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
+    return out
 
 
 def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float, white: float) -> None:
@@ -165,10 +172,14 @@ def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float, white:
 
 
 def run_recording(tasks: list[Task]) -> list[dict]:
-    """Run tasks of one recording in order, sharing its ground truth (:class:`GroundTruthCache`)."""
+    """Run tasks of one recording in order, sharing its ground truth (:class:`GroundTruthCache`) and the open
+    file (opened and validated once; its views keep what they read, such as the event index, and attributes)."""
     white = tasks[0].white
     cache = GroundTruthCache(white) if white is not None and all(t.white == white for t in tasks) else None
-    return [run_task(t, cache) for t in tasks]
+    if any(t.entry.path != tasks[0].entry.path for t in tasks):
+        return [run_task(t, cache if t.white == white else None) for t in tasks]
+    with open_recording(tasks[0].entry.path) as rec:
+        return [run_task(t, cache, rec) for t in tasks]
 
 
 #: Jobs per worker below which a recording's methods are split over several jobs (load balance).
@@ -192,6 +203,20 @@ def _batches(tasks: list[Task], workers: int) -> list[list[Task]]:
     return groups
 
 
+def _start_method() -> str:
+    """How pool workers start: ``fork`` where it is safe, else ``spawn``.
+
+    A forked worker starts with this process's imports (numpy, scipy, h5py, numba and the methods: ≈ 2 s of CPU
+    that every spawned worker spends again, as long as a small dataset's whole evaluation). Forking is safe when
+    this process runs no other thread (a lock held by one would stay locked in the child) and holds no renderer
+    state (``simspad generate`` evaluates after Mitsuba has started its own native threads); then spawn.
+    """
+    if ("fork" in mp.get_all_start_methods() and threading.active_count() == 1
+            and not any(m in sys.modules for m in ("mitsuba", "drjit", "distributed"))):
+        return "fork"
+    return "spawn"
+
+
 def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = True) -> list[dict]:
     """Run tasks (process pool of ≤ 2 workers when there is more than one task); results in task order.
 
@@ -200,6 +225,22 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
     workers = min(MAX_WORKERS, len(tasks), workers or os.cpu_count() or 1)
     batches = _batches(tasks, workers)
     results: list[list[dict] | None] = [None] * len(batches)
+    pool = futures = None
+    if workers > 1:
+        start_method = _start_method()
+        if start_method == "fork":
+            # The first compiled function a process loads from numba's cache sets up numba's code generator
+            # (≈ 0.5 s of CPU): done here once, the forked workers inherit it.
+            pairwise_sum(np.zeros(1), 0, 1)
+        # Workers start before the progress bar, whose monitor thread would make forking unsafe.
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(start_method),
+                                   initializer=die_with_parent_and_ignore_sigint)
+        try:
+            with sigint_blocked():  # workers start deaf to Ctrl-C: the driver alone reports it
+                futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
+        except BaseException:
+            kill_pool_workers(pool)
+            raise
     with tqdm(total=len(tasks), desc="evaluate", unit="run", file=sys.stderr, dynamic_ncols=True,
               disable=not progress) as bar:
         def done(i: int, out: list[dict]) -> None:
@@ -207,15 +248,11 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
             bar.set_postfix_str(batches[i][0].entry.key, refresh=False)
             bar.update(len(out))
 
-        if workers <= 1:
+        if pool is None:
             for i, b in enumerate(batches):
                 done(i, run_recording(b))
         else:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                       initializer=die_with_parent_and_ignore_sigint)
             try:
-                with sigint_blocked():  # workers start deaf to Ctrl-C: the driver alone reports it
-                    futures = {pool.submit(run_recording, b): i for i, b in enumerate(batches)}
                 for fut in as_completed(futures):
                     done(futures[fut], fut.result())
             except BaseException:

@@ -14,8 +14,11 @@ space: with x = ln(max(rec, ε_rec)) and y = ln(max(gt, ε_gt)) over all pixels,
 ε_gt = 10⁻³·W (one thousandth of the white point, far below what the display mapping resolves: 10⁻³ maps to
 sRGB 0.0129) and ε_rec = 10⁻³ × the 99th percentile of the reconstruction frame (its scale is arbitrary).
 
-PSNR and SSIM come from scikit-image with ``data_range=1`` on the display-mapped frames. PSNR is capped at
-:data:`PSNR_CAP_DB` (a frame identical to the ground truth would otherwise give +inf and poison the mean).
+PSNR and SSIM are scikit-image's (``peak_signal_noise_ratio``, ``structural_similarity``) with ``data_range=1``
+on the display-mapped frames, computed here with the same arithmetic to the last bit (:func:`psnr_db` in NumPy,
+SSIM in :mod:`simspad.evaluate.ssim`): scikit-image's PSNR alone imports ``scipy.stats`` (≈ 1 s of CPU in every
+process), and its SSIM's call overhead dominated scoring. PSNR is capped at :data:`PSNR_CAP_DB` (a frame
+identical to the ground truth would otherwise give +inf and poison the mean).
 
 MTF (Siemens star): along circles of radius r around the star's centre the star is a periodic pattern of
 ``n_cycles`` periods, i.e. spatial frequency f = n_cycles / (2π r) cycles per pixel. On each circle h = F_n/F_0 is
@@ -29,12 +32,13 @@ not inside the measured band).
 
 from __future__ import annotations
 
+import functools
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
 from scipy.ndimage import map_coordinates
-from skimage.metrics import mean_squared_error, peak_signal_noise_ratio, structural_similarity
 
+from simspad.evaluate.ssim import mean_ssim
 from simspad.physics.colour import srgb_encode
 
 PSNR_CAP_DB = 100.0
@@ -176,7 +180,12 @@ def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float | None = None) 
     """
     if white is None:
         white = white_point(gt)
-    x = _log_floored(rec, log_floor_rec(rec)).ravel()
+    return _fit_log(_log_floored(rec, log_floor_rec(rec)), gt, white)
+
+
+def _fit_log(x: np.ndarray, gt: np.ndarray, white: float) -> tuple[float, float]:
+    """:func:`affine_log_fit` given the floored log of the reconstruction ``x``."""
+    x = x.ravel()
     y = _log_floored(gt, LOG_FLOOR_REL * white).ravel()
     xm, ym = x.mean(), y.mean()
     dx = x - xm
@@ -187,32 +196,37 @@ def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float | None = None) 
 
 def align_log_affine(rec: np.ndarray, gt: np.ndarray, white: float) -> np.ndarray:
     """The reconstruction after the per-frame log-space affine fit: exp(a·ln(rec) + b), float32."""
-    a, b = affine_log_fit(rec, gt, white)
     x = _log_floored(rec, log_floor_rec(rec))
+    a, b = _fit_log(x, gt, white)
     return np.exp(a * x + b).astype(np.float32)
 
 
 # -- image metrics ---------------------------------------------------------------------------------------------
 
 def psnr_db(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
-    """PSNR (dB) of display-mapped frames in [0, 1] (scikit-image, data_range=1), capped at PSNR_CAP_DB."""
-    mse = float(mean_squared_error(np.asarray(gt_display, np.float64), np.asarray(rec_display, np.float64)))
+    """PSNR (dB) of display-mapped frames in [0, 1], capped at PSNR_CAP_DB: scikit-image's
+    ``peak_signal_noise_ratio(gt, rec, data_range=1)``, the same NumPy operations."""
+    gt = np.asarray(gt_display, np.float64)
+    rec = np.asarray(rec_display, np.float64)
+    if gt.shape != rec.shape:
+        raise ValueError(f"frames of different shapes {gt.shape} and {rec.shape}")
+    mse = float(np.mean((gt - rec) ** 2, dtype=np.float64))
     if mse <= 10 ** (-PSNR_CAP_DB / 10):
         return PSNR_CAP_DB
-    return float(peak_signal_noise_ratio(np.asarray(gt_display, np.float64), np.asarray(rec_display, np.float64),
-                                         data_range=1.0))
+    return float(10 * np.log10((1.0 ** 2) / np.float64(mse)))
 
 
 def ssim(rec_display: np.ndarray, gt_display: np.ndarray) -> float:
-    """SSIM of display-mapped frames in [0, 1] (scikit-image, data_range=1, 7×7 window or the largest odd
-    window that fits a tiny image)."""
+    """SSIM of display-mapped frames in [0, 1]: scikit-image's ``structural_similarity(gt, rec, data_range=1)``
+    with a 7×7 window, or the largest odd window that fits a tiny image (:func:`simspad.evaluate.ssim.mean_ssim`,
+    bit for bit)."""
     g = np.asarray(gt_display, np.float64)
     r = np.asarray(rec_display, np.float64)
     win = min(7, min(g.shape[-2:]))
     win -= 1 - win % 2
     if win < 3:
         return float("nan")
-    return float(structural_similarity(g, r, data_range=1.0, win_size=win))
+    return mean_ssim(g, r, win_size=win, data_range=1.0)
 
 
 def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: bool,
@@ -225,8 +239,9 @@ def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: 
     rec = np.asarray(rec, dtype=np.float64)
     a = b = float("nan")
     if not absolute_scale:
-        a, b = affine_log_fit(rec, gt, white)
-        rec = np.exp(a * _log_floored(rec, log_floor_rec(rec)) + b)
+        x = _log_floored(rec, log_floor_rec(rec))  # floor and logarithm taken once for the fit and its use
+        a, b = _fit_log(x, gt, white)
+        rec = np.exp(a * x + b)
     rd = display_map(rec, white)
     gd = display_map(gt, white) if gt_display is None else gt_display
     return {"psnr_db": psnr_db(rd, gd), "ssim": ssim(rd, gd), "fit_a": a, "fit_b": b}
@@ -234,17 +249,29 @@ def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: 
 
 # -- MTF from a Siemens star ------------------------------------------------------------------------------------
 
-def _circle_samples(img: np.ndarray, cy: float, cx: float, r: float, n_samples: int) -> np.ndarray:
+def _circle_coordinates(cy: float, cx: float, r: float, n_samples: int) -> np.ndarray:
     theta = np.arange(n_samples) * (2 * np.pi / n_samples)
-    coords = np.vstack([cy + r * np.sin(theta), cx + r * np.cos(theta)])
-    return map_coordinates(np.asarray(img, np.float64), coords, order=1, mode="nearest")
+    return np.vstack([cy + r * np.sin(theta), cx + r * np.cos(theta)])
+
+
+def _circle_samples(img: np.ndarray, cy: float, cx: float, r: float, n_samples: int) -> np.ndarray:
+    return map_coordinates(np.asarray(img, np.float64), _circle_coordinates(cy, cx, r, n_samples), order=1,
+                           mode="nearest")
+
+
+def _harmonic_samples(r: float, n_cycles: int) -> int:
+    """Samples on the circle of radius ``r`` for its ``n_cycles``-th harmonic: ≥ 64, 8 per cycle, 2 per px."""
+    return max(64, int(8 * n_cycles), int(np.ceil(2 * np.pi * r * 2)))
+
+
+def _harmonic(samples: np.ndarray, n_cycles: int) -> complex:
+    f = np.fft.rfft(samples)
+    return complex(f[n_cycles] / f[0]) if abs(f[0]) > 0 else 0j
 
 
 def _circle_harmonic(img: np.ndarray, cy: float, cx: float, r: float, n_cycles: int) -> complex:
     """The ``n_cycles``-th angular Fourier coefficient on the circle of radius ``r``, divided by the mean."""
-    n_samples = max(64, int(8 * n_cycles), int(np.ceil(2 * np.pi * r * 2)))
-    f = np.fft.rfft(_circle_samples(img, cy, cx, r, n_samples))
-    return complex(f[n_cycles] / f[0]) if abs(f[0]) > 0 else 0j
+    return _harmonic(_circle_samples(img, cy, cx, r, _harmonic_samples(r, n_cycles)), n_cycles)
 
 
 def circle_modulation(img: np.ndarray, cy: float, cx: float, r: float, n_cycles: int) -> float:
@@ -270,10 +297,14 @@ def siemens_star_geometry(gt: np.ndarray, max_cycles: int = 128) -> tuple[float,
     radii = np.linspace(0.45, 0.9, 6) * R
 
     def best_harmonic(cy, cx):
+        # every circle sampled in one call; the spectra summed circle by circle
+        coords = np.concatenate([_circle_coordinates(cy, cx, r, 1024) for r in radii], axis=1)
+        v = map_coordinates(gt, coords, order=1, mode="nearest").reshape(radii.size, 1024)
+        means = [row.mean() for row in v]
+        amp = np.abs(np.fft.rfft(v - np.array(means)[:, None]))[:, :max_cycles + 1]
         spec = np.zeros(max_cycles + 1)
-        for r in radii:
-            v = _circle_samples(gt, cy, cx, r, 1024)
-            spec += np.abs(np.fft.rfft(v - v.mean()))[:max_cycles + 1] / v.mean() if v.mean() > 0 else 0.0
+        for a, m in zip(amp, means):
+            spec += a / m if m > 0 else 0.0
         k = MIN_STAR_CYCLES + int(np.argmax(spec[MIN_STAR_CYCLES:]))
         return spec[k], k
 
@@ -301,13 +332,27 @@ def _star_radii(geometry: tuple[float, float, int, float], n_radii: int) -> np.n
     return np.geomspace(r_min, r_max, n_radii)
 
 
+@functools.lru_cache(maxsize=16)
+def _star_circles(geometry: tuple[float, float, int, float], n_radii: int) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Sample positions [2, N] on every circle of :func:`star_harmonics` (one after the other) and the samples
+    per circle, read-only (the same for every frame of a recording)."""
+    cy, cx, n, _ = geometry
+    counts = tuple(_harmonic_samples(r, n) for r in _star_radii(geometry, n_radii))
+    coords = np.concatenate([_circle_coordinates(cy, cx, r, c)
+                             for r, c in zip(_star_radii(geometry, n_radii), counts)], axis=1)
+    coords.flags.writeable = False
+    return coords, counts
+
+
 def star_harmonics(img: np.ndarray, geometry: tuple[float, float, int, float], n_radii: int = 24) -> np.ndarray:
     """The star's normalised harmonic F_n/F_0 on each circle of :func:`mtf_siemens` (empty when none fits)."""
-    cy, cx, n, _ = geometry
-    radii = _star_radii(geometry, n_radii)
-    if radii is None:
+    geometry = (float(geometry[0]), float(geometry[1]), int(geometry[2]), float(geometry[3]))
+    if _star_radii(geometry, n_radii) is None:
         return np.empty(0, complex)
-    return np.array([_circle_harmonic(img, cy, cx, r, n) for r in radii])
+    coords, counts = _star_circles(geometry, n_radii)
+    v = map_coordinates(np.asarray(img, np.float64), coords, order=1, mode="nearest")  # every circle at once
+    ends = np.cumsum(counts)
+    return np.array([_harmonic(v[e - c:e], geometry[2]) for c, e in zip(counts, ends)])
 
 
 def mtf_siemens(rec: np.ndarray, gt: np.ndarray, *, n_radii: int = 24,

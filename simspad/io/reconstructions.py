@@ -1,7 +1,8 @@
 """Saved reconstructions of a results directory: ``reconstructions/<rec>/<method>.h5``.
 
 Layout: ``/t`` [N] float64 s, ``/flux`` [N,H,W] float32 ph s⁻¹ m⁻² (one LZF-compressed chunk per frame), root
-attributes ``method``, ``recording``, ``units``. Frames are written as the method produces them.
+attributes ``method``, ``recording``, ``units``. Frames are written as the method produces them, a few at a
+time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same).
 """
 
 from __future__ import annotations
@@ -10,6 +11,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+#: Most bytes of frames held before they are written (memory does not grow with the sequence length).
+BUFFER_BYTES = 8 * 2**20
 
 
 class ReconstructionSink:
@@ -35,10 +39,28 @@ class ReconstructionSink:
                                          chunks=(1, *shape), compression="lzf", track_times=False)
         for k, v in attrs.items():
             self.h5.attrs[k] = v
+        frame_bytes = max(1, int(np.prod(shape)) * 4)
+        self._buffer = np.empty((max(1, min(len(times_s), BUFFER_BYTES // frame_bytes)), *shape), np.float32)
+        self._first = 0  # index of the frame in _buffer[0]
+        self._held = 0  # frames held in _buffer
 
     def __call__(self, i: int, img: np.ndarray) -> None:
-        """Store frame ``i``."""
-        self.ds[i] = img
+        """Store frame ``i`` (written with the next frames, at the latest on :meth:`close`)."""
+        if self._held and (i != self._first + self._held or self._held == len(self._buffer)):
+            self.flush()
+        if not self._held:
+            self._first = i
+        self._buffer[self._held] = img
+        self._held += 1
+
+    def flush(self) -> None:
+        """Write the frames held."""
+        if self._held:
+            self.ds[self._first:self._first + self._held] = self._buffer[:self._held]
+            self._held = 0
 
     def close(self) -> None:
-        self.h5.close()
+        try:
+            self.flush()
+        finally:
+            self.h5.close()

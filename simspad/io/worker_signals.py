@@ -59,7 +59,12 @@ def kill_pool_workers(pool) -> None:
     Used when the driver is interrupted: the workers ignore Ctrl-C, and waiting for their running tasks could
     take minutes. Their temporary files are removed by the next run. ``_processes`` is the pool's own table.
     """
+    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it
     for proc in list((getattr(pool, "_processes", None) or {}).values()):
         with contextlib.suppress(Exception):
             proc.kill()
     pool.shutdown(wait=False, cancel_futures=True)
+    if manager is not None and manager is not threading.current_thread():
+        # The pool's thread sees its workers die and closes its wake-up pipe; the interpreter's exit hook writes
+        # to that pipe unlocked, so an exit during the closing raised "OSError: Bad file descriptor". Wait for it.
+        manager.join(timeout=10)

@@ -10,7 +10,7 @@ For every output instant a burst of raw binary frames centred there is processed
    of Gaussian-smoothed block sums (L1 cost, radius 4 at the coarsest level; L2 cost, radius 1 at finer
    levels, tiles of ``tile_px``), sub-pixel refinement by a parabola through the L2 costs and Lucas–Kanade
    iterations per tile; the tile flow is interpolated bilinearly to a dense field;
-4. warp (``scipy.ndimage.map_coordinates``, bilinear) and robust merge: per pixel the warped block is pulled
+4. warp (bilinear, edges clamped) and robust merge: per pixel the warped block is pulled
    towards the reference by a Wiener-like shrinkage of the local mismatch energy in excess of the binomial noise
    (:func:`robust_merge`; the pixel-domain counterpart of the QBP temporal Wiener merge), then summed;
 5. inverse response: ``Φ̂ = (−ln(1 − S/n)/gate − r_dark)/q`` on the merged count S of n bins (absolute scale).
@@ -19,11 +19,12 @@ Simplifications (documented gaps): flow is estimated and applied per block (cons
 per-frame flow interpolation); the merge is in the pixel domain, not per Fourier tile. Defaults: bursts of
 1000 bins in blocks of 100 (≈ 10 ms at 97.7 kHz; QBP uses 100–500-frame blocks).
 Bandwidth: raw binary frames, 1 bit per bin at 1/bin_s (the paper's QBP @100 kHz).
+Steps 3 and 4 run in compiled kernels (:mod:`simspad.methods.qbp_kernels`) that follow the SciPy calls they
+replace operation by operation.
 """
 
 from __future__ import annotations
 
-import functools
 from collections import OrderedDict
 from typing import NamedTuple
 
@@ -33,6 +34,7 @@ from scipy import ndimage
 
 from simspad.errors import InputError
 from simspad.methods.method import Method
+from simspad.methods.qbp_kernels import dense_warp, lucas_kanade_tiles, merge_block, median3x3_nearest, subpixel_median
 from simspad.methods.spad_response import SpadResponse, estimate_flux
 
 HOT_DCR_CPS = 100.0
@@ -124,14 +126,6 @@ def match_tiles(ref, img, search: TileSearch, out: TileMatches) -> None:
                 cost_x[ty, tx, k] = _tile_cost(ref, img, y0, y1, x0, x1, by, bx + k - 1, True)
 
 
-def _parabola(c: np.ndarray) -> np.ndarray:
-    # Costs of candidates outside the image are inf: inf − inf gives NaN, masked out just below.
-    with np.errstate(invalid="ignore", divide="ignore"):
-        den = c[..., 0] - 2.0 * c[..., 1] + c[..., 2]
-        off = np.where(np.isfinite(den) & (den > 0), 0.5 * (c[..., 0] - c[..., 2]) / den, 0.0)
-    return np.clip(np.nan_to_num(off), -0.5, 0.5)
-
-
 def _downsample(img: np.ndarray) -> np.ndarray:
     h, w = img.shape[0] // 2 * 2, img.shape[1] // 2 * 2
     return img[:h, :w].reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
@@ -141,44 +135,11 @@ def _tile_grid(shape, tile):
     return (shape[0] + tile - 1) // tile, (shape[1] + tile - 1) // tile
 
 
-@functools.lru_cache(maxsize=8)
-def _pixel_grid(shape: tuple[int, int]) -> np.ndarray:
-    """``np.mgrid`` of an image shape as float64 [2, H, W], read-only (shared by every call on that shape)."""
-    g = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
-    g.flags.writeable = False
-    return g
-
-
-@functools.lru_cache(maxsize=8)
-def _tile_coordinates(shape: tuple[int, int], tile: int) -> np.ndarray:
-    """Every pixel's position in units of tiles, relative to the first tile's centre [2, H, W], read-only."""
-    yy, xx = _pixel_grid(shape)
-    uv = np.stack([(yy - (tile - 1) / 2.0) / tile, (xx - (tile - 1) / 2.0) / tile])
-    uv.flags.writeable = False
-    return uv
-
-
-def dense_flow(tile_flow: np.ndarray, shape: tuple[int, int], tile: int) -> np.ndarray:
-    """Bilinear interpolation of a per-tile flow [ny, nx] (at tile centres) to every pixel [H, W]."""
-    return ndimage.map_coordinates(tile_flow, _tile_coordinates(tuple(shape), tile), order=1, mode="nearest")
-
-
-def warp(img: np.ndarray, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
-    """``img(p + f(p))`` by bilinear interpolation, edges clamped."""
-    yy, xx = _pixel_grid(img.shape)
-    return ndimage.map_coordinates(img, [yy + fy, xx + fx], order=1, mode="nearest")
-
-
-def _tile_expand(tile_flow: np.ndarray, shape, tile: int) -> np.ndarray:
-    return np.repeat(np.repeat(tile_flow, tile, axis=0), tile, axis=1)[:shape[0], :shape[1]]
-
-
-def _tile_sum(a: np.ndarray, tile: int, grid) -> np.ndarray:
-    H, W = a.shape
-    ny, nx = grid
-    pad = np.zeros((ny * tile, nx * tile))
-    pad[:H, :W] = a
-    return pad.reshape(ny, tile, nx, tile).sum(axis=(1, 3))
+def warp_by_tile_flow(img: np.ndarray, tile_fy: np.ndarray, tile_fx: np.ndarray, tile: int) -> np.ndarray:
+    """``img(p + f(p))``, bilinear with edges clamped, where ``f`` is the per-tile flow [ny, nx] (at the centres of
+    tiles of ``tile`` px) interpolated bilinearly to every pixel."""
+    return dense_warp(np.ascontiguousarray(img, np.float64), np.ascontiguousarray(tile_fy, np.float64),
+                      np.ascontiguousarray(tile_fx, np.float64), int(tile))
 
 
 class BlockPyramid(NamedTuple):
@@ -223,7 +184,6 @@ def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smo
     if img_pyramid is None:
         img_pyramid = block_pyramid(img, smooth_px)
     pyr = list(zip(ref_pyramid.levels, img_pyramid.levels))
-    r, m = pyr[0]
     flow_y = flow_x = None
     prev_tile = None
     for level in range(len(pyr) - 1, -1, -1):
@@ -245,38 +205,18 @@ def estimate_block_flow(ref: np.ndarray, img: np.ndarray, tile_px: int = 16, smo
         cost_y = np.zeros(grid + (3,))
         cost_x = np.zeros(grid + (3,))
         match_tiles(rl, ml, TileSearch(tile, radius, init_y, init_x, l2), TileMatches(dy, dx, cost_y, cost_x))
-        # A 3×3 median over tiles removes isolated mismatches (flat or noisy tiles) before they seed finer levels.
-        flow_y = ndimage.median_filter(dy + _parabola(cost_y), size=3, mode="nearest")
-        flow_x = ndimage.median_filter(dx + _parabola(cost_x), size=3, mode="nearest")
+        # Sub-pixel vertex of the cost parabola, then a 3×3 median over tiles: it removes isolated mismatches
+        # (flat or noisy tiles) before they seed finer levels.
+        flow_y = subpixel_median(dy, cost_y)
+        flow_x = subpixel_median(dx, cost_x)
         prev_tile = tile
-    tile = tile_px
-    grid = flow_y.shape
-    gy_r, gx_r = ref_pyramid.gradient
-    for _ in range(lk_iterations):
-        # Piecewise-constant flow while refining, so that each tile's Lucas–Kanade step is its own.
-        fy, fx = _tile_expand(flow_y, r.shape, tile), _tile_expand(flow_x, r.shape, tile)
-        w = warp(m, fy, fx)
-        yy, xx = _pixel_grid(r.shape)  # float copies of the integer grid: the same sums and comparisons
-        # Pixels whose sample falls outside the image (clamped values) carry no information.
-        inside = ((yy + fy >= 0) & (yy + fy <= r.shape[0] - 1) & (xx + fx >= 0) & (xx + fx <= r.shape[1] - 1))
-        gw = np.gradient(w)
-        gy, gx = 0.5 * (gw[0] + gy_r) * inside, 0.5 * (gw[1] + gx_r) * inside
-        it = w - r
-        a11 = _tile_sum(gy * gy, tile, grid)
-        a12 = _tile_sum(gy * gx, tile, grid)
-        a22 = _tile_sum(gx * gx, tile, grid)
-        b1 = _tile_sum(gy * it, tile, grid)
-        b2 = _tile_sum(gx * it, tile, grid)
-        det = a11 * a22 - a12 * a12
-        ok = det > 1e-9 * (a11 + a22) ** 2 + 1e-30
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sy = np.where(ok, -(a22 * b1 - a12 * b2) / det, 0.0)
-            sx = np.where(ok, -(a11 * b2 - a12 * b1) / det, 0.0)
-        flow_y = flow_y + np.clip(sy, -0.5, 0.5)
-        flow_x = flow_x + np.clip(sx, -0.5, 0.5)
     if lk_iterations:
-        flow_y = ndimage.median_filter(flow_y, size=3, mode="nearest")
-        flow_x = ndimage.median_filter(flow_x, size=3, mode="nearest")
+        # Piecewise-constant flow while refining, so that each tile's Lucas–Kanade step is its own.
+        gy_r, gx_r = ref_pyramid.gradient
+        r, m = pyr[0]
+        lucas_kanade_tiles(r, m, gy_r, gx_r, flow_y, flow_x, int(tile_px), int(lk_iterations))
+        flow_y = median3x3_nearest(flow_y)
+        flow_x = median3x3_nearest(flow_x)
     return flow_y, flow_x
 
 
@@ -289,15 +229,13 @@ def robust_merge(ref: np.ndarray, warped: list[np.ndarray], block_bins: int, c: 
     aliasing of fine periodic texture that a box mean of the signed difference would average away), and the
     Wiener-like shrinkage ``A = E/(E + c·σ²)`` replaces the block by the reference in proportion.
     """
+    ref = np.ascontiguousarray(ref, np.float64)
     p_ref = np.clip(ref / block_bins, 0.0, 1.0)
-    total = ref.astype(np.float64).copy()
+    p_ref_var = p_ref * (1 - p_ref)
+    total = ref.copy()
     for w in warped:
-        p = np.clip(w / block_bins, 0.0, 1.0)
-        var = ndimage.uniform_filter(block_bins * (p * (1 - p) + p_ref * (1 - p_ref)), window_px, mode="nearest")
-        m = ndimage.uniform_filter((w - ref) ** 2, window_px, mode="nearest")
-        excess = np.maximum(m - var, 0.0)
-        a = excess / (excess + c * var + 1e-12)
-        total += w + a * (ref - w)
+        merge_block(total, ref, p_ref_var, np.ascontiguousarray(w, np.float64), float(block_bins), float(c),
+                    int(window_px))
     return total
 
 
@@ -325,8 +263,7 @@ def qbp_merge(blocks: list[np.ndarray], ref_index: int, block_bins: int, tile_px
         fy_t, fx_t = estimate_block_flow(ref, b, tile_px, ref_pyramid=pyramids[ref_index] if pyramids else None,
                                          img_pyramid=pyramids[k] if pyramids else None)
         flows.append((fy_t, fx_t))
-        warped.append(warp(b.astype(np.float64), dense_flow(fy_t, ref.shape, tile_px),
-                           dense_flow(fx_t, ref.shape, tile_px)))
+        warped.append(warp_by_tile_flow(b, fy_t, fx_t, tile_px))
     return robust_merge(ref, warped, block_bins), flows
 
 

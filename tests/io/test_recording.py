@@ -42,11 +42,18 @@ def test_round_trip_bits_events_and_determinism(tmp_path):
         assert rec.sensors == ("spad", "events")
         np.testing.assert_array_equal(rec.spad.bits(0, rec.spad.n_bins), bits)
         np.testing.assert_array_equal(rec.spad.counts(17, 250, chunk=50), bits[17:250].sum(0))
+        again = rec.spad.counts(17, 250)  # kept from the call above: a copy the caller may change
+        again += 1
+        np.testing.assert_array_equal(rec.spad.counts(17, 250), bits[17:250].sum(0))
         for t0, t1 in ((0.0, 0.003), (0.0012345, 0.0021), (0.0005, 0.0005)):
             ev = rec.events.window(t0, t1)
             expected = t_us[(t_us >= t0 * 1e6 - 1e-6) & (t_us < t1 * 1e6 - 1e-6)]
             np.testing.assert_array_equal(ev["t"], expected)
         assert sum(len(c["t"]) for c in rec.events.iter_chunks(chunk=77)) == t_us.size
+        assert rec.events.n_events == t_us.size and rec.events.by_index(3, 9)["label"].size == 6
+        attrs = rec.spad.attrs
+        attrs["bin_s"] = 0.0  # a copy: the view keeps what it read
+        assert rec.spad.attrs["bin_s"] == 10.24e-6
         assert rec.spec == {"a": 1}
 
 

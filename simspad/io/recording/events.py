@@ -25,11 +25,20 @@ class EventsView(GroupView):
     def __init__(self, h5, path):
         super().__init__(h5, path, "events")
         self._ms_to_idx = None
+        self._fields: dict = {}  # dataset handles, looked up once: an HDF5 name lookup costs more than a window
+
+    def _field(self, name: str):
+        """The dataset ``/events/<name>`` (None when absent), its handle kept for the next reads."""
+        if name not in self._fields:
+            g = self._h5["events"]
+            self._fields[name] = g[name] if name in g else None
+        return self._fields[name]
 
     @property
     def n_events(self) -> int:
         """Number of events."""
-        return int(self._dataset("t").shape[0])
+        t = self._field("t") if "events" in self._h5 else None
+        return int(t.shape[0]) if t is not None else int(self._dataset("t").shape[0])
 
     @property
     def ms_to_idx(self) -> np.ndarray:
@@ -51,7 +60,7 @@ class EventsView(GroupView):
             lo, hi = int(idx[ms]), int(idx[ms + 1])
         if lo >= hi:
             return lo
-        t = self._h5["events/t"][lo:hi]
+        t = self._field("t")[lo:hi]
         return lo + int(np.searchsorted(t, t_us, side="left"))
 
     def index_range(self, t0_s: float, t1_s: float) -> tuple[int, int]:
@@ -90,9 +99,9 @@ class EventsView(GroupView):
 
     def by_index(self, i0: int, i1: int) -> dict[str, np.ndarray]:
         """Events ``i0:i1`` as a dict of arrays (``label`` zeros when the recording has none)."""
-        g = self._h5["events"]
-        out = {k: g[k][i0:i1] for k in _FIELDS}
-        out["label"] = g["label"][i0:i1] if "label" in g else np.zeros(i1 - i0, np.uint8)
+        out = {k: self._field(k)[i0:i1] for k in _FIELDS}
+        label = self._field("label")
+        out["label"] = label[i0:i1] if label is not None else np.zeros(i1 - i0, np.uint8)
         return out
 
     def window(self, t0_s: float, t1_s: float) -> dict[str, np.ndarray]:

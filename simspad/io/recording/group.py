@@ -27,11 +27,15 @@ class GroupView:
         self._h5 = h5
         self._path = path
         self._name = name
+        self._attrs: dict | None = None
 
     @property
     def attrs(self) -> dict:
-        """Attributes of the group as plain Python values (JSON text left as text)."""
-        return {k: decode_attr(v) for k, v in self._h5[self._name].attrs.items()}
+        """Attributes of the group as plain Python values (JSON text left as text); read once (a recording is
+        opened read-only), a fresh dict each time."""
+        if self._attrs is None:
+            self._attrs = {k: decode_attr(v) for k, v in self._h5[self._name].attrs.items()}
+        return dict(self._attrs)
 
     def _dataset(self, name: str) -> h5py.Dataset:
         """The dataset ``<group>/<name>``; InputError naming it when the recording lacks it."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Iterator
 
 import numpy as np
@@ -11,6 +12,8 @@ from simspad.io.recording.samples import SpadBlocks
 
 #: Binary frames read per chunk by default (bounded memory whatever the recording length).
 CHUNK_BINS = 1024
+#: Most bytes of photon counts :meth:`SpadView.counts` keeps for the next caller asking for the same frames.
+COUNTS_CACHE_BYTES = 32 * 2**20
 
 
 class SpadView(GroupView):
@@ -20,6 +23,8 @@ class SpadView(GroupView):
         super().__init__(h5, path, "spad")
         self._width = width
         self._height = height
+        # counts by (start, stop), oldest first: methods scored on one open recording aggregate the same frames
+        self._counts: OrderedDict[tuple[int, int], np.ndarray] = OrderedDict()
 
     @property
     def t_start(self) -> np.ndarray:
@@ -49,10 +54,23 @@ class SpadView(GroupView):
             yield i, self.bits(i, min(i + chunk, stop))
 
     def counts(self, start: int, stop: int, chunk: int = CHUNK_BINS) -> np.ndarray:
-        """Number of ones per pixel over binary frames ``start:stop`` (``[H,W]`` int32), read in chunks."""
+        """Number of ones per pixel over binary frames ``start:stop`` (``[H,W]`` int32), read in chunks.
+
+        The last results (up to ``COUNTS_CACHE_BYTES``) are kept: another method asking for the same frames of this
+        open recording gets a copy without decoding the bits again.
+        """
+        key = (int(start), int(stop))
+        hit = self._counts.get(key)
+        if hit is not None:
+            self._counts.move_to_end(key)
+            return hit.copy()
         total = np.zeros((self._height, self._width), np.int32)
         for _, bits in self.iter_bits(start, stop, chunk):
             total += bits.sum(axis=0, dtype=np.int32)
+        if total.nbytes <= COUNTS_CACHE_BYTES:
+            self._counts[key] = total.copy()
+            while len(self._counts) * total.nbytes > COUNTS_CACHE_BYTES:
+                self._counts.popitem(last=False)
         return total
 
     def blocks(self, n_bins: int) -> SpadBlocks:
