@@ -23,8 +23,11 @@ def _workers_started(pid: int) -> bool:
 
 
 def _press_ctrl_c_twice(simspad_cli, *args, gap_s: float) -> subprocess.CompletedProcess:
+    # Its own group, as in a terminal, with Ctrl-C's default action: a suite started as a background job (`&`
+    # in a non-interactive shell) runs with SIGINT ignored, which children inherit and SimSPAD rightly keeps.
     proc = subprocess.Popen(simspad_cli.command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=simspad_cli.env, start_new_session=True)  # its own group, as in a terminal
+                            env=simspad_cli.env, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while proc.poll() is None and not _workers_started(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
