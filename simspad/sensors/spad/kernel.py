@@ -33,14 +33,17 @@ import numpy as np
 
 from simspad.physics.rng import GOLDEN_GAMMA, geometric, mix64, uniform
 
-#: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
-#: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
-#: benchmarks/bench_spad.py (any value in 0.04–0.08 gave the same time at mean P(1) = 0.01 and 0.05).
-SPARSE_MAX_PROBABILITY = 0.08
-# The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
+#: Per-byte choice of sampler: a byte whose expected sparse candidates per bin reach this uses the dense sampler
+#: (whose cost does not depend on the rates): near the crossover measured with the kernel alone on the scene of
+#: benchmarks/bench_spad.py.
+DENSE_MIN_CANDIDATES = 0.3
+# The dense sampler splits one 64-bit draw into four 16-bit slices.
+_S0 = np.uint64(0)
+_S16 = np.uint64(16)
 _S32 = np.uint64(32)
-_M32 = np.uint64(0xFFFFFFFF)
-_TWO32 = 4294967296.0
+_S48 = np.uint64(48)
+_M16 = np.uint64(0xFFFF)
+_TWO16 = 65536.0
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
 
 
@@ -80,8 +83,8 @@ class PixelResponse(NamedTuple):
     """Detection area × gate, m² s: Λ per unit photon irradiance."""
     gate_s: float
     """Gate, s."""
-    sparse_max_probability: float
-    """Bytes whose largest detection probability bound is below this use the sparse sampler."""
+    dense_min_candidates: float
+    """Bytes whose expected sparse candidates per bin reach this use the dense sampler."""
     log1m_afterpulse: float
     """ln(1 − afterpulsing probability); 0 when the effect is off."""
     log1m_crosstalk: float
@@ -153,11 +156,39 @@ def _lam(layout, k, y, x, dark):
 
 
 @numba.njit(inline="always")
-def _store_row(out, row, y):
-    """``out[k, y, :] = row[k, :]`` for every bin k: each line written once, whole."""
-    for k in range(row.shape[0]):
-        for xb in range(row.shape[1]):
-            out[k, y, xb] = row[k, xb]
+def _lane_hit(word, shift, t16):
+    """Bernoulli from 16 random bits against ``t16 = z·2¹⁶``: (1 if u ≥ z for sure, 1 if tied)."""
+    u = np.int64((word >> shift) & _M16)
+    threshold = np.int64(t16)  # ⌊z·2¹⁶⌋ (t16 ≥ 0)
+    return np.int64(u > threshold), np.int64(u == threshold)
+
+
+@numba.njit(inline="always")
+def _dense_bin(words0, words1, t16, hits, n_dense, state):
+    """One bin of a row's dense bytes: 8 Bernoulli bits per byte from two counter-addressed 64-bit draws.
+
+    Bit ``b`` of dense byte ``i`` compares the ``b mod 4``-th 16-bit slice of draw ``2i + b // 4`` with
+    ``t16[b, i] = z·2¹⁶`` (z = exp(−Λ)): the bit is 1 when the uniform it starts, u = (slice + rest)/2¹⁶, is
+    ≥ z. A slice above ⌊z·2¹⁶⌋ decides 1 and one below decides 0 whatever the rest; only a tie (probability
+    2⁻¹⁶) needs more bits, drawn by the caller. Returns (ones decided, ties).
+    """
+    total = np.int64(0)
+    ties = np.int64(0)
+    for i in range(n_dense):
+        w0 = mix64(state + words0[i])
+        w1 = mix64(state + words1[i])
+        h0, e0 = _lane_hit(w0, _S0, t16[0, i])
+        h1, e1 = _lane_hit(w0, _S16, t16[1, i])
+        h2, e2 = _lane_hit(w0, _S32, t16[2, i])
+        h3, e3 = _lane_hit(w0, _S48, t16[3, i])
+        h4, e4 = _lane_hit(w1, _S0, t16[4, i])
+        h5, e5 = _lane_hit(w1, _S16, t16[5, i])
+        h6, e6 = _lane_hit(w1, _S32, t16[6, i])
+        h7, e7 = _lane_hit(w1, _S48, t16[7, i])
+        hits[i] = np.uint8(h0 | (h1 << 1) | (h2 << 2) | (h3 << 3) | (h4 << 4) | (h5 << 5) | (h6 << 6) | (h7 << 7))
+        total += h0 + h1 + h2 + h3 + h4 + h5 + h6 + h7
+        ties += e0 + e1 + e2 + e3 + e4 + e5 + e6 + e7
+    return total, ties
 
 
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
@@ -170,18 +201,17 @@ def spad_chunk(out, events, layout, response, seed):
     keyframes; a gate that straddles a keyframe is a run of its own), so the keyframes of the call bound every
     gate mean.
 
-    The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
-    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, with z = exp(−Λ) advanced by one
-    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's
-    sparse bytes in raster order, then its dense bytes.
+    The sampler is chosen per output byte (8 pixels) by its expected cost: sparse (geometric skips over the
+    byte's pixel × bin slots + thinning) while the byte's expected candidates per bin stay below
+    ``response.dense_min_candidates``, else dense (bin by bin, with z = exp(−Λ) advanced by one multiplication
+    per bin inside a run). The random stream is consumed in that order: row by row, the row's sparse bytes in
+    raster order, then its dense bytes.
 
     Parameters
     ----------
     out : ndarray [m, H, ceil(W/8)] uint8
-        Packed bits in the recording's order. The samplers run pixel by pixel through time, so they write one
-        row of all bins at a time into an L1-resident [m, ceil(W/8)] buffer, which is then stored line by line.
-        (Written in place, a byte's bins lie H·ceil(W/8) bytes apart, a multiple of 4 KiB at common widths: they
-        map to the same cache sets and every write would miss.)
+        Packed bits in the recording's order. It is zeroed first (one sequential pass); the sparse sampler then
+        sets only the bits of its detections and the dense sampler writes its bytes.
     events : ndarray [capacity, 3] int64
         Receives the secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as
         (bin, row, col). A fixed buffer (no array is carried through the loops, which would cost reference
@@ -207,6 +237,9 @@ def spad_chunk(out, events, layout, response, seed):
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
     Wb = (W + 7) // 8
+    flat = out.reshape(-1)
+    for i in range(flat.size):  # a memset: sparse bytes are only ORed into
+        flat[i] = 0
     state = np.uint64(seed)
     ap_left = np.int64(1) << 62  # never reaches zero when the effect is off
     ct_left = np.int64(1) << 62
@@ -216,32 +249,27 @@ def spad_chunk(out, events, layout, response, seed):
         state, ct_left = geometric(state, log1m_ct)
     countdown = (ap_left, ct_left)
     n_events = np.int64(0)
-    lam_dense = -math.log1p(-min(response.sparse_max_probability, 1.0 - 1e-12))
+    dense_min = response.dense_min_candidates
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
     dense_b = np.empty(Wb, np.int64)
     row_hi = np.empty(W, np.float32)
-    row = np.empty((m, Wb), np.uint8)  # one row of every bin: L1-resident while the samplers write it
     row_lo = np.empty(W, np.float32)
     lam_row = np.empty(W, np.float64)
     slope_row = np.empty(W, np.float64)
-    # dense bytes of each row run through all bins right after the row's sparse bytes, into the same row buffer
     bin_run = layout.bin_run
-    t_even = np.empty(4 * Wb, np.float64)
-    t_odd = np.empty(4 * Wb, np.float64)
-    f_even = np.empty(4 * Wb, np.float64)
-    f_odd = np.empty(4 * Wb, np.float64)
-    hit_even = np.empty(4 * Wb, np.uint8)
-    hit_odd = np.empty(4 * Wb, np.uint8)
-    gammas = np.empty(4 * Wb, np.uint64)
-    for q in range(4 * Wb):
-        gammas[q] = np.uint64(q + 1) * GOLDEN_GAMMA
+    # dense bytes: z·2¹⁶ and its per-bin factor for bit b of the row's i-th dense byte, the byte of each bin
+    t16 = np.empty((8, Wb), np.float64)
+    f16 = np.empty((8, Wb), np.float64)
+    hits = np.empty(Wb, np.uint8)
+    words0 = np.empty(Wb, np.uint64)
+    words1 = np.empty(Wb, np.uint64)
+    for i in range(Wb):
+        words0[i] = np.uint64(2 * i + 1) * GOLDEN_GAMMA
+        words1[i] = np.uint64(2 * i + 2) * GOLDEN_GAMMA
     for y in range(H):
         n_dense = 0
-        for k in range(m):
-            for xb in range(Wb):
-                row[k, xb] = 0
         # the row's flux bounds over the call's keyframes, keyframe by keyframe (contiguous: the loops vectorise)
         first = slots[0]
         for x in range(W):
@@ -257,6 +285,7 @@ def spad_chunk(out, events, layout, response, seed):
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
+            sum_hi = 0.0
             for bit in range(8):
                 lam_hi[bit] = 0.0  # pixels past the right edge: never a detection
                 lam_lo[bit] = 0.0
@@ -268,20 +297,21 @@ def spad_chunk(out, events, layout, response, seed):
                 lam_hi[bit] = q_gate * hi + dark
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
                 hi_byte = max(hi_byte, lam_hi[bit])
-            if hi_byte >= lam_dense:
+                sum_hi += lam_hi[bit]
+            # expected candidates per bin: jointly at the byte's largest rate, or pixel by pixel (a hot pixel among
+            # dark ones); the dense sampler costs the same whatever the rates
+            joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0
+            if min(8.0 * hi_byte, sum_hi) >= dense_min:
                 dense_b[n_dense] = xb
                 n_dense += 1
                 continue
             if hi_byte <= 0.0:
                 continue
             # sparse: candidate slots over the byte's 8 pixels × m bins (s = 8·k + bit) at the byte's largest rate,
-            # or pixel by pixel (s = k) where one bright pixel (a hot one) would make the joint candidates dearer
-            sum_hi = 0.0
+            # or pixel by pixel (s = k)
             for bit in range(8):
                 lo = lam_lo[bit]
                 lo_bound[bit] = lo * (1.0 - 0.5 * lo)  # 1 − e^(−Λ) ≥ Λ − Λ²/2: a lower bound of every p_k
-                sum_hi += lam_hi[bit]
-            joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0  # expected draws: candidates + terminations
             for g in range(1 if joint else x_end):
                 rate = hi_byte if joint else lam_hi[g]
                 if rate <= 0.0:
@@ -310,16 +340,15 @@ def spad_chunk(out, events, layout, response, seed):
                         # p_k = 1 − e^(−Λ) lies in [Λ − Λ²/2, Λ]: the exponential only inside that band
                         if up >= lam or (up >= lam * (1.0 - 0.5 * lam) and up >= -math.expm1(-lam)):
                             continue
-                    row[k, xb] |= np.uint8(1 << bit)
+                    out[k, y, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
                         state, n_events, countdown = _secondaries(state, events, n_events, countdown, k, y, x,
                                                                   shape, response)
                     else:
                         countdown = (ap_left - 1, ct_left - 4)
-        # the dense bytes' pixels as (even, odd) pairs: one 64-bit draw gives both their 32-bit uniforms, and
-        # the draws of a bin are addressed by counter (state + j·γ), so the loop over pairs vectorises
-        n_pairs = 4 * n_dense
+        # the dense bytes, bin by bin: 4 pixels per 64-bit draw, the draws of a bin addressed by counter
+        # (state + j·γ), so the loop over bytes vectorises
         for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
@@ -338,45 +367,40 @@ def spad_chunk(out, events, layout, response, seed):
                         slope_row[x] += dc * v
                 for i in range(n_dense):
                     for bit in range(8):
-                        q = 4 * i + (bit >> 1)
                         x = 8 * dense_b[i] + bit
-                        t = _TWO32  # z = 1 past the right edge: never a detection
+                        t = _TWO16  # z = 1 past the right edge: never a detection (and never a tie)
                         f = 1.0
                         if x < W:
-                            t = _TWO32 * math.exp(-max(lam_row[x], 0.0))
+                            t = _TWO16 * math.exp(-max(lam_row[x], 0.0))
                             slope = slope_row[x]
                             f = math.exp(-slope) if slope != 0.0 else 1.0
-                        if bit & 1:
-                            t_odd[q] = t
-                            f_odd[q] = f
-                        else:
-                            t_even[q] = t
-                            f_even[q] = f
-            # bit = 1 when u < 1 − z, i.e. u·2³² ≥ z·2³² = t (exact: a power-of-two scale); t advances by one
-            # multiplication per bin inside a run
-            total = np.int64(0)
-            for q in range(n_pairs):
-                w = mix64(state + gammas[q])
-                he = float(np.int64(w & _M32)) >= t_even[q]
-                ho = float(np.int64(w >> _S32)) >= t_odd[q]
-                hit_even[q] = he
-                hit_odd[q] = ho
-                total += np.int64(he) + np.int64(ho)
-                t_even[q] *= f_even[q]
-                t_odd[q] *= f_odd[q]
-            state += np.uint64(n_pairs) * GOLDEN_GAMMA
-            ap_left, ct_left = countdown
-            quiet = ap_left >= total and ct_left >= 4 * total  # no secondary due in this row of this bin
-            if quiet:
-                countdown = (ap_left - total, ct_left - 4 * total)
+                        t16[bit, i] = t
+                        f16[bit, i] = f
+            total, ties = _dense_bin(words0, words1, t16, hits, n_dense, state)
+            state_bin = state
+            state += np.uint64(2 * n_dense) * GOLDEN_GAMMA
+            if ties > 0:  # a 16-bit slice equal to ⌊z·2¹⁶⌋: the uniform's further bits decide (u ≥ z)
+                for i in range(n_dense):
+                    for bit in range(8):
+                        w = mix64(state_bin + (words0[i] if bit < 4 else words1[i]))
+                        u16 = float((w >> np.uint64(16 * (bit & 3))) & _M16)
+                        t = t16[bit, i]
+                        if u16 == math.floor(t):
+                            state, rest = uniform(state)
+                            if rest >= t - u16:  # exact: t − ⌊t⌋ is representable
+                                hits[i] |= np.uint8(1 << bit)
+                                total += 1
+            for bit in range(8):
+                for i in range(n_dense):
+                    t16[bit, i] *= f16[bit, i]
             for i in range(n_dense):
-                q = 4 * i
-                value = np.int64(hit_even[q] | (hit_odd[q] << 1) | (hit_even[q + 1] << 2) | (hit_odd[q + 1] << 3)
-                                 | (hit_even[q + 2] << 4) | (hit_odd[q + 2] << 5) | (hit_even[q + 3] << 6)
-                                 | (hit_odd[q + 3] << 7))
-                row[k, dense_b[i]] = np.uint8(value)
-                if quiet:
-                    continue
+                out[k, y, dense_b[i]] = hits[i]
+            ap_left, ct_left = countdown
+            if ap_left >= total and ct_left >= 4 * total:  # no secondary due in this row of this bin
+                countdown = (ap_left - total, ct_left - 4 * total)
+                continue
+            for i in range(n_dense):
+                value = np.int64(hits[i])
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
@@ -387,7 +411,6 @@ def spad_chunk(out, events, layout, response, seed):
                                                                       response)
                 else:
                     countdown = (ap_left - count, ct_left - 4 * count)
-        _store_row(out, row, y)
     return n_events
 
 
