@@ -44,6 +44,8 @@ _S32 = np.uint64(32)
 _S48 = np.uint64(48)
 _M16 = np.uint64(0xFFFF)
 _TWO16 = 65536.0
+#: Bytes of the sampling buffer (all bins of a block of rows), well inside L2.
+_BLOCK_BYTES = 512 << 10
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
 
 
@@ -210,8 +212,9 @@ def spad_chunk(out, events, layout, response, seed):
     Parameters
     ----------
     out : ndarray [m, H, ceil(W/8)] uint8
-        Packed bits in the recording's order. It is zeroed first (one sequential pass); the sparse sampler then
-        sets only the bits of its detections and the dense sampler writes its bytes.
+        Packed bits in the recording's order. The samplers write a block of rows of all bins at a time into a
+        zeroed L2-resident buffer (the sparse sampler sets only the bits of its detections, the dense sampler
+        writes whole bytes), which is then stored bin by bin.
     events : ndarray [capacity, 3] int64
         Receives the secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as
         (bin, row, col). A fixed buffer (no array is carried through the loops, which would cost reference
@@ -237,9 +240,11 @@ def spad_chunk(out, events, layout, response, seed):
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
     Wb = (W + 7) // 8
-    flat = out.reshape(-1)
-    for i in range(flat.size):  # a memset: sparse bytes are only ORed into
-        flat[i] = 0
+    # rows are sampled in blocks into a contiguous [m, rows, Wb] buffer that stays in L2, then stored bin by bin
+    # (rows·Wb contiguous bytes each). Written in place, a byte's bins lie H·Wb bytes apart, a multiple of
+    # 4 KiB at common widths: they map to the same few cache sets and every detection would miss.
+    block_rows = max(1, min(H, _BLOCK_BYTES // max(m * Wb, 1)))
+    block = np.empty((m, block_rows, Wb), np.uint8)
     state = np.uint64(seed)
     ap_left = np.int64(1) << 62  # never reaches zero when the effect is off
     ct_left = np.int64(1) << 62
@@ -269,6 +274,9 @@ def spad_chunk(out, events, layout, response, seed):
         words0[i] = np.uint64(2 * i + 1) * GOLDEN_GAMMA
         words1[i] = np.uint64(2 * i + 2) * GOLDEN_GAMMA
     for y in range(H):
+        row_in_block = y % block_rows
+        if row_in_block == 0:
+            block[:] = 0
         n_dense = 0
         # the row's flux bounds over the call's keyframes, keyframe by keyframe (contiguous: the loops vectorise)
         first = slots[0]
@@ -340,7 +348,7 @@ def spad_chunk(out, events, layout, response, seed):
                         # p_k = 1 − e^(−Λ) lies in [Λ − Λ²/2, Λ]: the exponential only inside that band
                         if up >= lam or (up >= lam * (1.0 - 0.5 * lam) and up >= -math.expm1(-lam)):
                             continue
-                    out[k, y, xb] |= np.uint8(1 << bit)
+                    block[k, row_in_block, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
                         state, n_events, countdown = _secondaries(state, events, n_events, countdown, k, y, x,
@@ -394,7 +402,7 @@ def spad_chunk(out, events, layout, response, seed):
                 for i in range(n_dense):
                     t16[bit, i] *= f16[bit, i]
             for i in range(n_dense):
-                out[k, y, dense_b[i]] = hits[i]
+                block[k, row_in_block, dense_b[i]] = hits[i]
             ap_left, ct_left = countdown
             if ap_left >= total and ct_left >= 4 * total:  # no secondary due in this row of this bin
                 countdown = (ap_left - total, ct_left - 4 * total)
@@ -411,6 +419,12 @@ def spad_chunk(out, events, layout, response, seed):
                                                                       response)
                 else:
                     countdown = (ap_left - count, ct_left - 4 * count)
+        if row_in_block == block_rows - 1 or y == H - 1:  # the block is complete: store its rows of every bin
+            y0 = y - row_in_block
+            for k in range(m):
+                for j in range(row_in_block + 1):
+                    for xb in range(Wb):
+                        out[k, y0 + j, xb] = block[k, j, xb]
     return n_events
 
 
