@@ -3,18 +3,26 @@
 Efficiency
 ----------
 Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
-are simulated per output byte (8 pixels) by whichever of two exact samplers is cheaper for the byte's largest
-probability bound p_max (the flux is piecewise linear, so its bounds sit on keyframes):
+are simulated per output byte (8 pixels) by whichever of two exact samplers is expected to be cheaper, from the
+byte's rate bounds (the flux is piecewise linear, so its bounds sit on keyframes): the sparse one while its
+expected candidates per bin stay below :data:`DENSE_MIN_CANDIDATES`, else the dense one.
 
-- *sparse* (p_max < :data:`SPARSE_MAX_PROBABILITY`): the byte's 8 pixels × m bins form one sequence of
-  candidate slots; geometric skips between candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one
-  exponential draw per candidate) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
+- *sparse*: the byte's 8 pixels × m bins form one sequence of candidate slots; geometric skips between
+  candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one ziggurat exponential per candidate,
+  :mod:`simspad.physics.ziggurat`) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
   and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
   terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
-  among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel;
-- *dense*: bin by bin, one 32-bit uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
-  multiplication per bin inside a linear piece (Λ is affine in k there). A row's dense pixels are drawn in one
-  vectorised loop (SplitMix64 draws addressed by counter, half a draw per pixel), then packed into bytes.
+  among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel, so a hot
+  pixel does not make its byte dense;
+- *dense*: bin by bin, each pixel's bit compares a 16-bit slice of a random word with ``⌊z_k·2¹⁶⌋``,
+  ``z_k = exp(−Λ_k)`` (advanced by one multiplication per bin inside a linear piece, where Λ is affine in k);
+  only a tie (probability 2⁻¹⁶) draws the uniform's further bits, so the bit is exactly Bernoulli(1 − z_k) with
+  four pixels per 64-bit draw. A row's dense bytes are drawn in one vectorised loop (SplitMix64 draws addressed
+  by counter), and the start of each linear piece sets z for the whole row with an inlined exponential
+  (:mod:`simspad.physics.vector_exp`).
+
+Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
+(in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
 
 The random stream is a SplitMix64 generator (:mod:`simspad.physics.rng`) inside the numba kernel, seeded per
 kernel call from the caller's ``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for
