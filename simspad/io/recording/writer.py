@@ -258,7 +258,10 @@ class RecordingWriter:
         filled in place (no resize per chunk); exactly ``n_rows`` rows must then be appended.
         """
         tail_shape = tuple(int(s) for s in tail_shape)
-        length = (0, None) if n_rows is None else (int(n_rows), int(n_rows))
+        n_rows = int(n_rows) if n_rows else None  # an empty dataset stays growable (HDF5 has no 0-row chunks)
+        length = (0, None) if n_rows is None else (n_rows, n_rows)
+        if n_rows is not None:
+            chunk_rows = min(int(chunk_rows), max(int(n_rows), 1))  # HDF5: a chunk fits inside fixed dimensions
         ds = self.h5.create_dataset(name, shape=(length[0], *tail_shape), maxshape=(length[1], *tail_shape),
                                     dtype=dtype, chunks=(max(1, int(chunk_rows)), *tail_shape),
                                     compression=compression, track_times=False)
