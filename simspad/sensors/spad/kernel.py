@@ -42,17 +42,12 @@ import numpy as np
 from simspad.physics.rng import GOLDEN_GAMMA, geometric, mix64, uniform
 from simspad.physics.vector_exp import exp_fast
 from simspad.physics.ziggurat import exponential_zig
+from simspad.sensors.spad.dense_bits import M16, dense_bits
 
 #: Per-byte choice of sampler: a byte whose expected sparse candidates per bin reach this uses the dense sampler
 #: (whose cost does not depend on the rates): near the crossover measured with the kernel alone on the scene of
 #: benchmarks/bench_spad.py.
 DENSE_MIN_CANDIDATES = 0.3
-# The dense sampler splits one 64-bit draw into four 16-bit slices.
-_S0 = np.uint64(0)
-_S16 = np.uint64(16)
-_S32 = np.uint64(32)
-_S48 = np.uint64(48)
-_M16 = np.uint64(0xFFFF)
 _TWO16 = 65536.0
 #: Bytes of the sampling buffer (all bins of a block of rows), well inside L2.
 _BLOCK_BYTES = 512 << 10
@@ -165,42 +160,6 @@ def _lam(layout, k, y, x, dark):
     for t in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
         lam += (layout.term_c[t] + dk * layout.term_dc[t]) * float(layout.images[layout.term_img[t], y, x])
     return lam if lam > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def _lane_hit(word, shift, t16):
-    """Bernoulli from 16 random bits against ``t16 = z·2¹⁶``: (1 if u ≥ z for sure, 1 if tied)."""
-    u = np.int64((word >> shift) & _M16)
-    threshold = np.int64(t16)  # ⌊z·2¹⁶⌋ (t16 ≥ 0)
-    return np.int64(u > threshold), np.int64(u == threshold)
-
-
-@numba.njit(inline="always")
-def _dense_bin(words0, words1, t16, hits, n_dense, state):
-    """One bin of a row's dense bytes: 8 Bernoulli bits per byte from two counter-addressed 64-bit draws.
-
-    Bit ``b`` of dense byte ``i`` compares the ``b mod 4``-th 16-bit slice of draw ``2i + b // 4`` with
-    ``t16[b, i] = z·2¹⁶`` (z = exp(−Λ)): the bit is 1 when the uniform it starts, u = (slice + rest)/2¹⁶, is
-    ≥ z. A slice above ⌊z·2¹⁶⌋ decides 1 and one below decides 0 whatever the rest; only a tie (probability
-    2⁻¹⁶) needs more bits, drawn by the caller. Returns (ones decided, ties).
-    """
-    total = np.int64(0)
-    ties = np.int64(0)
-    for i in range(n_dense):
-        w0 = mix64(state + words0[i])
-        w1 = mix64(state + words1[i])
-        h0, e0 = _lane_hit(w0, _S0, t16[0, i])
-        h1, e1 = _lane_hit(w0, _S16, t16[1, i])
-        h2, e2 = _lane_hit(w0, _S32, t16[2, i])
-        h3, e3 = _lane_hit(w0, _S48, t16[3, i])
-        h4, e4 = _lane_hit(w1, _S0, t16[4, i])
-        h5, e5 = _lane_hit(w1, _S16, t16[5, i])
-        h6, e6 = _lane_hit(w1, _S32, t16[6, i])
-        h7, e7 = _lane_hit(w1, _S48, t16[7, i])
-        hits[i] = np.uint8(h0 | (h1 << 1) | (h2 << 2) | (h3 << 3) | (h4 << 4) | (h5 << 5) | (h6 << 6) | (h7 << 7))
-        total += h0 + h1 + h2 + h3 + h4 + h5 + h6 + h7
-        ties += e0 + e1 + e2 + e3 + e4 + e5 + e6 + e7
-    return total, ties
 
 
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
@@ -397,14 +356,14 @@ def spad_chunk(out, events, layout, response, seed):
                             f = slope_row[x]
                         t16[bit, i] = t
                         f16[bit, i] = f
-            total, ties = _dense_bin(words0, words1, t16, hits, n_dense, state)
+            total, ties = dense_bits(words0, words1, t16, hits, n_dense, state)
             state_bin = state
             state += np.uint64(2 * n_dense) * GOLDEN_GAMMA
             if ties > 0:  # a 16-bit slice equal to ⌊z·2¹⁶⌋: the uniform's further bits decide (u ≥ z)
                 for i in range(n_dense):
                     for bit in range(8):
                         w = mix64(state_bin + (words0[i] if bit < 4 else words1[i]))
-                        u16 = float((w >> np.uint64(16 * (bit & 3))) & _M16)
+                        u16 = float((w >> np.uint64(16 * (bit & 3))) & M16)
                         t = t16[bit, i]
                         if u16 == math.floor(t):
                             state, rest = uniform(state)
