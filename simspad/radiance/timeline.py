@@ -199,8 +199,10 @@ class Timeline:
         return self.scaled(flux_scale(mean, lux, optics))
 
     # ------------------------------------------------------------------ values
-    def keyframe(self, i: int) -> np.ndarray:
-        """Luminance of keyframe ``i`` × scale, [H, W] float32."""
+    def keyframe(self, i: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Luminance of keyframe ``i`` × scale, [H, W] float32 (written into ``out`` when given: no temporary)."""
+        if out is not None:
+            return np.multiply(self._y(i), np.float32(self.scale), out=out)
         return self._y(i) * np.float32(self.scale)
 
     def rgb_keyframe(self, i: int) -> np.ndarray:

@@ -93,3 +93,29 @@ def test_file_bytes_do_not_depend_on_how_rows_are_batched(tmp_path):
             np.testing.assert_array_equal(f["events/t"][()], rows)
         digests.add(hashlib.sha256((tmp_path / name).read_bytes()).hexdigest())
     assert len(digests) == 1
+
+
+def test_presized_dataset_is_filled_in_place_and_checks_its_length(tmp_path):
+    """``n_rows``: created at its final length, the same rows whatever the batching, the same bytes; appending more
+    rows than declared, or fewer by the end, is an error (and leaves no file)."""
+    rows = np.arange(5000 * 3, dtype=np.uint8).reshape(5000, 3)
+    digests = set()
+    for name, cuts in (("one.h5", [5000]), ("many.h5", [1, 1023, 2000, 1976])):
+        with RecordingWriter(tmp_path / name, {"width": 1, "height": 1, "duration_s": 1.0, "lux": 1.0}) as w:
+            app = w.append_dataset("spad/bits", (3,), np.uint8, chunk_rows=512, n_rows=rows.shape[0])
+            i = 0
+            for c in cuts:
+                app.append(rows[i:i + c])
+                i += c
+        with h5py.File(tmp_path / name) as f:
+            np.testing.assert_array_equal(f["spad/bits"][()], rows)
+            assert f["spad/bits"].maxshape[0] == rows.shape[0]
+        digests.add(hashlib.sha256((tmp_path / name).read_bytes()).hexdigest())
+    assert len(digests) == 1
+    with pytest.raises(ValueError, match="rows appended"):
+        with RecordingWriter(tmp_path / "over.h5") as w:
+            w.append_dataset("spad/bits", (3,), np.uint8, chunk_rows=512, n_rows=10).append(rows[:11])
+    with pytest.raises(ValueError, match="rows appended"):
+        with RecordingWriter(tmp_path / "short.h5") as w:
+            w.append_dataset("spad/bits", (3,), np.uint8, chunk_rows=4, n_rows=10).append(rows[:9])
+    assert not (tmp_path / "over.h5").exists() and not (tmp_path / "short.h5").exists()

@@ -192,14 +192,18 @@ def _gate_integral(knots_t, knots_y, a, b):
     return np.trapezoid(np.interp(t, knots_t, knots_y), t)
 
 
-@pytest.mark.parametrize("peak_lambda,shape", [(0.6, (16, 24)), (0.06, (48, 64))])  # dense; sparse + thinning
+@pytest.mark.parametrize("peak_lambda,shape", [(0.6, (16, 24)), (0.03, (96, 64))])  # dense; sparse + thinning
 def test_time_varying_ramp_integrates_exactly(peak_lambda, shape):
     """Keyframes every 7.3 µs alternate dark and bright, gate 6 µs: most gates straddle knots.
 
     Per-bin counts over the pixels follow Binomial(N, 1 − exp(−q·∫_gate Φ)) for the exact integral; sampling the
     flux at the gate's midpoint instead is rejected by the same statistic. Λ peaks at 0.6 (dense sampler) or
-    0.06 (sparse sampler, whose thinning then carries the time variation).
+    0.03 (sparse sampler: 8·0.03 expected candidates per byte and bin, below ``DENSE_MIN_CANDIDATES``; its
+    thinning then carries the time variation).
     """
+    from simspad.sensors.spad.kernel import DENSE_MIN_CANDIDATES
+
+    assert (8 * peak_lambda < DENSE_MIN_CANDIDATES) == (peak_lambda < 0.1)  # each case reaches its sampler
     gate, n = 6e-6, 2500
     knots_t = np.arange(0, n * BIN_S + 20e-6, 7.3e-6)
     p = SpadParams(gate_s=gate, **QUIET)

@@ -3,18 +3,26 @@
 Efficiency
 ----------
 Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
-are simulated per output byte (8 pixels) by whichever of two exact samplers is cheaper for the byte's largest
-probability bound p_max (the flux is piecewise linear, so its bounds sit on keyframes):
+are simulated per output byte (8 pixels) by whichever of two exact samplers is expected to be cheaper, from the
+byte's rate bounds (the flux is piecewise linear, so its bounds sit on keyframes): the sparse one while its
+expected candidates per bin stay below :data:`DENSE_MIN_CANDIDATES`, else the dense one.
 
-- *sparse* (p_max < :data:`SPARSE_MAX_PROBABILITY`): the byte's 8 pixels × m bins form one sequence of
-  candidate slots; geometric skips between candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one
-  exponential draw per candidate) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
+- *sparse*: the byte's 8 pixels × m bins form one sequence of candidate slots; geometric skips between
+  candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one ziggurat exponential per candidate,
+  :mod:`simspad.physics.ziggurat`) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
   and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
   terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
-  among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel;
-- *dense*: bin by bin, one 32-bit uniform per pixel compared with ``z_k = exp(−Λ_k)``, which is advanced by one
-  multiplication per bin inside a linear piece (Λ is affine in k there). A row's dense pixels are drawn in one
-  vectorised loop (SplitMix64 draws addressed by counter, half a draw per pixel), then packed into bytes.
+  among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel, so a hot
+  pixel does not make its byte dense;
+- *dense*: bin by bin, each pixel's bit compares a 16-bit slice of a random word with ``⌊z_k·2¹⁶⌋``,
+  ``z_k = exp(−Λ_k)`` (advanced by one multiplication per bin inside a linear piece, where Λ is affine in k);
+  only a tie (probability 2⁻¹⁶) draws the uniform's further bits, so the bit is exactly Bernoulli(1 − z_k) with
+  four pixels per 64-bit draw. A row's dense bytes are drawn in one vectorised loop (SplitMix64 draws addressed
+  by counter), and the start of each linear piece sets z for the whole row with an inlined exponential
+  (:mod:`simspad.physics.vector_exp`).
+
+Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
+(in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
 
 The random stream is a SplitMix64 generator (:mod:`simspad.physics.rng`) inside the numba kernel, seeded per
 kernel call from the caller's ``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for
@@ -32,15 +40,17 @@ import numba
 import numpy as np
 
 from simspad.physics.rng import GOLDEN_GAMMA, geometric, mix64, uniform
+from simspad.physics.vector_exp import exp_fast
+from simspad.physics.ziggurat import exponential_zig
+from simspad.sensors.spad.dense_bits import M16, dense_bits
 
-#: Per-byte choice of sampler by the byte's largest detection probability p_max: sparse (skips) below this,
-#: dense (one uniform per bin) from it on: near the crossover measured with the kernel alone on the scene of
-#: benchmarks/bench_spad.py (any value in 0.04–0.08 gave the same time at mean P(1) = 0.01 and 0.05).
-SPARSE_MAX_PROBABILITY = 0.08
-# The dense sampler splits one 64-bit draw into two 32-bit uniforms (resolution 2⁻³²).
-_S32 = np.uint64(32)
-_M32 = np.uint64(0xFFFFFFFF)
-_TWO32 = 4294967296.0
+#: Per-byte choice of sampler: a byte whose expected sparse candidates per bin reach this uses the dense sampler
+#: (whose cost does not depend on the rates): near the crossover measured with the kernel alone on the scene of
+#: benchmarks/bench_spad.py.
+DENSE_MIN_CANDIDATES = 0.3
+_TWO16 = 65536.0
+#: Bytes of the sampling buffer (all bins of a block of rows), well inside L2.
+_BLOCK_BYTES = 512 << 10
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
 
 
@@ -80,8 +90,8 @@ class PixelResponse(NamedTuple):
     """Detection area × gate, m² s: Λ per unit photon irradiance."""
     gate_s: float
     """Gate, s."""
-    sparse_max_probability: float
-    """Bytes whose largest detection probability bound is below this use the sparse sampler."""
+    dense_min_candidates: float
+    """Bytes whose expected sparse candidates per bin reach this use the dense sampler."""
     log1m_afterpulse: float
     """ln(1 − afterpulsing probability); 0 when the effect is off."""
     log1m_crosstalk: float
@@ -152,14 +162,6 @@ def _lam(layout, k, y, x, dark):
     return lam if lam > 0.0 else 0.0
 
 
-@numba.njit(inline="always")
-def _store_row(out, row, y):
-    """``out[k, y, :] = row[k, :]`` for every bin k: each line written once, whole."""
-    for k in range(row.shape[0]):
-        for xb in range(row.shape[1]):
-            out[k, y, xb] = row[k, xb]
-
-
 # One kernel (not split further): the sparse and dense samplers share the random stream and the secondary
 # countdowns, and separate calls would cost the register-resident state that makes the dense path fast.
 @numba.njit(cache=True)
@@ -170,18 +172,18 @@ def spad_chunk(out, events, layout, response, seed):
     keyframes; a gate that straddles a keyframe is a run of its own), so the keyframes of the call bound every
     gate mean.
 
-    The sampler is chosen per output byte (8 pixels) from the byte's largest probability bound: sparse (geometric
-    skips over the byte's pixel × bin slots + thinning) or dense (bin by bin, with z = exp(−Λ) advanced by one
-    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's
-    sparse bytes in raster order, then its dense bytes.
+    The sampler is chosen per output byte (8 pixels) by its expected cost: sparse (geometric skips over the
+    byte's pixel × bin slots + thinning) while the byte's expected candidates per bin stay below
+    ``response.dense_min_candidates``, else dense (bin by bin, with z = exp(−Λ) advanced by one multiplication
+    per bin inside a run). The random stream is consumed in that order: row by row, the row's sparse bytes in
+    raster order, then its dense bytes.
 
     Parameters
     ----------
     out : ndarray [m, H, ceil(W/8)] uint8
-        Packed bits in the recording's order. The samplers run pixel by pixel through time, so they write one
-        row of all bins at a time into an L1-resident [m, ceil(W/8)] buffer, which is then stored line by line.
-        (Written in place, a byte's bins lie H·ceil(W/8) bytes apart, a multiple of 4 KiB at common widths: they
-        map to the same cache sets and every write would miss.)
+        Packed bits in the recording's order. The samplers write a block of rows of all bins at a time into a
+        zeroed L2-resident buffer (the sparse sampler sets only the bits of its detections, the dense sampler
+        writes whole bytes), which is then stored bin by bin.
     events : ndarray [capacity, 3] int64
         Receives the secondary detections (afterpulses in bin k+1, crosstalk to neighbours in bin k) as
         (bin, row, col). A fixed buffer (no array is carried through the loops, which would cost reference
@@ -207,6 +209,11 @@ def spad_chunk(out, events, layout, response, seed):
     H, W = images.shape[1], images.shape[2]
     shape = (H, W)
     Wb = (W + 7) // 8
+    # rows are sampled in blocks into a contiguous [m, rows, Wb] buffer that stays in L2, then stored bin by bin
+    # (rows·Wb contiguous bytes each). Written in place, a byte's bins lie H·Wb bytes apart, a multiple of
+    # 4 KiB at common widths: they map to the same few cache sets and every detection would miss.
+    block_rows = max(1, min(H, _BLOCK_BYTES // max(m * Wb, 1)))
+    block = np.empty((m, block_rows, Wb), np.uint8)
     state = np.uint64(seed)
     ap_left = np.int64(1) << 62  # never reaches zero when the effect is off
     ct_left = np.int64(1) << 62
@@ -216,32 +223,30 @@ def spad_chunk(out, events, layout, response, seed):
         state, ct_left = geometric(state, log1m_ct)
     countdown = (ap_left, ct_left)
     n_events = np.int64(0)
-    lam_dense = -math.log1p(-min(response.sparse_max_probability, 1.0 - 1e-12))
+    dense_min = response.dense_min_candidates
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
     dense_b = np.empty(Wb, np.int64)
     row_hi = np.empty(W, np.float32)
-    row = np.empty((m, Wb), np.uint8)  # one row of every bin: L1-resident while the samplers write it
     row_lo = np.empty(W, np.float32)
     lam_row = np.empty(W, np.float64)
     slope_row = np.empty(W, np.float64)
-    # dense bytes of each row run through all bins right after the row's sparse bytes, into the same row buffer
     bin_run = layout.bin_run
-    t_even = np.empty(4 * Wb, np.float64)
-    t_odd = np.empty(4 * Wb, np.float64)
-    f_even = np.empty(4 * Wb, np.float64)
-    f_odd = np.empty(4 * Wb, np.float64)
-    hit_even = np.empty(4 * Wb, np.uint8)
-    hit_odd = np.empty(4 * Wb, np.uint8)
-    gammas = np.empty(4 * Wb, np.uint64)
-    for q in range(4 * Wb):
-        gammas[q] = np.uint64(q + 1) * GOLDEN_GAMMA
+    # dense bytes: z·2¹⁶ and its per-bin factor for bit b of the row's i-th dense byte, the byte of each bin
+    t16 = np.empty((8, Wb), np.float64)
+    f16 = np.empty((8, Wb), np.float64)
+    hits = np.empty(Wb, np.uint8)
+    words0 = np.empty(Wb, np.uint64)
+    words1 = np.empty(Wb, np.uint64)
+    for i in range(Wb):
+        words0[i] = np.uint64(2 * i + 1) * GOLDEN_GAMMA
+        words1[i] = np.uint64(2 * i + 2) * GOLDEN_GAMMA
     for y in range(H):
+        row_in_block = y % block_rows
+        if row_in_block == 0:
+            block[:] = 0
         n_dense = 0
-        for k in range(m):
-            for xb in range(Wb):
-                row[k, xb] = 0
         # the row's flux bounds over the call's keyframes, keyframe by keyframe (contiguous: the loops vectorise)
         first = slots[0]
         for x in range(W):
@@ -257,6 +262,7 @@ def spad_chunk(out, events, layout, response, seed):
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
+            sum_hi = 0.0
             for bit in range(8):
                 lam_hi[bit] = 0.0  # pixels past the right edge: never a detection
                 lam_lo[bit] = 0.0
@@ -268,20 +274,21 @@ def spad_chunk(out, events, layout, response, seed):
                 lam_hi[bit] = q_gate * hi + dark
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
                 hi_byte = max(hi_byte, lam_hi[bit])
-            if hi_byte >= lam_dense:
+                sum_hi += lam_hi[bit]
+            # expected candidates per bin: jointly at the byte's largest rate, or pixel by pixel (a hot pixel among
+            # dark ones); the dense sampler costs the same whatever the rates
+            joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0
+            if min(8.0 * hi_byte, sum_hi) >= dense_min:
                 dense_b[n_dense] = xb
                 n_dense += 1
                 continue
             if hi_byte <= 0.0:
                 continue
             # sparse: candidate slots over the byte's 8 pixels × m bins (s = 8·k + bit) at the byte's largest rate,
-            # or pixel by pixel (s = k) where one bright pixel (a hot one) would make the joint candidates dearer
-            sum_hi = 0.0
+            # or pixel by pixel (s = k)
             for bit in range(8):
                 lo = lam_lo[bit]
                 lo_bound[bit] = lo * (1.0 - 0.5 * lo)  # 1 − e^(−Λ) ≥ Λ − Λ²/2: a lower bound of every p_k
-                sum_hi += lam_hi[bit]
-            joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0  # expected draws: candidates + terminations
             for g in range(1 if joint else x_end):
                 rate = hi_byte if joint else lam_hi[g]
                 if rate <= 0.0:
@@ -291,8 +298,8 @@ def spad_chunk(out, events, layout, response, seed):
                 n_slots = 8 * m if joint else m
                 s = np.int64(-1)
                 while True:
-                    state, u = uniform(state)
-                    skip = -math.log(1.0 - u) * inv_lam
+                    state, e = exponential_zig(state)  # no logarithm in ~99 % of draws
+                    skip = e * inv_lam
                     if skip >= n_slots - 1 - s:
                         break
                     s += 1 + np.int64(skip)
@@ -310,16 +317,15 @@ def spad_chunk(out, events, layout, response, seed):
                         # p_k = 1 − e^(−Λ) lies in [Λ − Λ²/2, Λ]: the exponential only inside that band
                         if up >= lam or (up >= lam * (1.0 - 0.5 * lam) and up >= -math.expm1(-lam)):
                             continue
-                    row[k, xb] |= np.uint8(1 << bit)
+                    block[k, row_in_block, xb] |= np.uint8(1 << bit)
                     ap_left, ct_left = countdown
                     if ap_left < 1 or ct_left < 4:  # a secondary is due (the buffer is touched only then)
                         state, n_events, countdown = _secondaries(state, events, n_events, countdown, k, y, x,
                                                                   shape, response)
                     else:
                         countdown = (ap_left - 1, ct_left - 4)
-        # the dense bytes' pixels as (even, odd) pairs: one 64-bit draw gives both their 32-bit uniforms, and
-        # the draws of a bin are addressed by counter (state + j·γ), so the loop over pairs vectorises
-        n_pairs = 4 * n_dense
+        # the dense bytes, bin by bin: 4 pixels per 64-bit draw, the draws of a bin addressed by counter
+        # (state + j·γ), so the loop over bytes vectorises
         for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
@@ -336,47 +342,45 @@ def spad_chunk(out, events, layout, response, seed):
                         v = float(images[img, y, x])
                         lam_row[x] += c * v
                         slope_row[x] += dc * v
+                # z·2¹⁶ and the per-bin factor for the whole row (an inlined exponential: the loop vectorises)
+                for x in range(W):
+                    lam_row[x] = _TWO16 * exp_fast(-max(lam_row[x], 0.0))
+                    slope_row[x] = exp_fast(-slope_row[x])
                 for i in range(n_dense):
                     for bit in range(8):
-                        q = 4 * i + (bit >> 1)
                         x = 8 * dense_b[i] + bit
-                        t = _TWO32  # z = 1 past the right edge: never a detection
+                        t = _TWO16  # z = 1 past the right edge: never a detection (and never a tie)
                         f = 1.0
                         if x < W:
-                            t = _TWO32 * math.exp(-max(lam_row[x], 0.0))
-                            slope = slope_row[x]
-                            f = math.exp(-slope) if slope != 0.0 else 1.0
-                        if bit & 1:
-                            t_odd[q] = t
-                            f_odd[q] = f
-                        else:
-                            t_even[q] = t
-                            f_even[q] = f
-            # bit = 1 when u < 1 − z, i.e. u·2³² ≥ z·2³² = t (exact: a power-of-two scale); t advances by one
-            # multiplication per bin inside a run
-            total = np.int64(0)
-            for q in range(n_pairs):
-                w = mix64(state + gammas[q])
-                he = float(np.int64(w & _M32)) >= t_even[q]
-                ho = float(np.int64(w >> _S32)) >= t_odd[q]
-                hit_even[q] = he
-                hit_odd[q] = ho
-                total += np.int64(he) + np.int64(ho)
-                t_even[q] *= f_even[q]
-                t_odd[q] *= f_odd[q]
-            state += np.uint64(n_pairs) * GOLDEN_GAMMA
-            ap_left, ct_left = countdown
-            quiet = ap_left >= total and ct_left >= 4 * total  # no secondary due in this row of this bin
-            if quiet:
-                countdown = (ap_left - total, ct_left - 4 * total)
+                            t = lam_row[x]
+                            f = slope_row[x]
+                        t16[bit, i] = t
+                        f16[bit, i] = f
+            total, ties = dense_bits(words0, words1, t16, hits, n_dense, state)
+            state_bin = state
+            state += np.uint64(2 * n_dense) * GOLDEN_GAMMA
+            if ties > 0:  # a 16-bit slice equal to ⌊z·2¹⁶⌋: the uniform's further bits decide (u ≥ z)
+                for i in range(n_dense):
+                    for bit in range(8):
+                        w = mix64(state_bin + (words0[i] if bit < 4 else words1[i]))
+                        u16 = float((w >> np.uint64(16 * (bit & 3))) & M16)
+                        t = t16[bit, i]
+                        if u16 == math.floor(t):
+                            state, rest = uniform(state)
+                            if rest >= t - u16:  # exact: t − ⌊t⌋ is representable
+                                hits[i] |= np.uint8(1 << bit)
+                                total += 1
+            for bit in range(8):
+                for i in range(n_dense):
+                    t16[bit, i] *= f16[bit, i]
             for i in range(n_dense):
-                q = 4 * i
-                value = np.int64(hit_even[q] | (hit_odd[q] << 1) | (hit_even[q + 1] << 2) | (hit_odd[q + 1] << 3)
-                                 | (hit_even[q + 2] << 4) | (hit_odd[q + 2] << 5) | (hit_even[q + 3] << 6)
-                                 | (hit_odd[q + 3] << 7))
-                row[k, dense_b[i]] = np.uint8(value)
-                if quiet:
-                    continue
+                block[k, row_in_block, dense_b[i]] = hits[i]
+            ap_left, ct_left = countdown
+            if ap_left >= total and ct_left >= 4 * total:  # no secondary due in this row of this bin
+                countdown = (ap_left - total, ct_left - 4 * total)
+                continue
+            for i in range(n_dense):
+                value = np.int64(hits[i])
                 count = np.int64(_POPCOUNT8[value])
                 ap_left, ct_left = countdown
                 if ap_left < count or ct_left < 4 * count:  # a secondary is due: resolve pixel by pixel
@@ -387,7 +391,12 @@ def spad_chunk(out, events, layout, response, seed):
                                                                       response)
                 else:
                     countdown = (ap_left - count, ct_left - 4 * count)
-        _store_row(out, row, y)
+        if row_in_block == block_rows - 1 or y == H - 1:  # the block is complete: store its rows of every bin
+            y0 = y - row_in_block
+            for k in range(m):
+                for j in range(row_in_block + 1):
+                    for xb in range(Wb):
+                        out[k, y0 + j, xb] = block[k, j, xb]
     return n_events
 
 

@@ -45,7 +45,7 @@ class KeyframeRing:
         slots = np.arange(i0, i1 + 1, dtype=np.int64) % n_slots
         for i, s in zip(range(i0, i1 + 1), slots):
             if self._held[s] != i:
-                self.images[s] = self.tl.keyframe(i)
+                self.tl.keyframe(i, out=self.images[s])
                 self._held[s] = i
         return slots
 

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad.kernel import (
-    SPARSE_MAX_PROBABILITY,
+    DENSE_MIN_CANDIDATES,
     PixelResponse,
     apply_events,
     spad_chunk,
@@ -28,7 +28,7 @@ from simspad.sensors.spad.model import dcr_map, n_bins, resolve_gate, spad_attrs
 CHUNK_BYTES = 16 << 20
 MIN_CHUNK_BINS = 64
 MAX_CHUNK_BINS = 8192
-#: Initial capacity of the secondary-detection buffer of a kernel call (grown when a call finds more).
+#: Smallest capacity of the secondary-detection buffer of a kernel call (grown when a call finds more).
 EVENTS_CAPACITY = 4096
 #: Keyframes one kernel call may span (bounds the images held per call whatever the keyframe rate).
 MAX_KEYFRAMES_PER_CALL = 16
@@ -67,9 +67,10 @@ class SpadChunker:
         self.log1m_ap = math.log1p(-ap) if 0 < ap < 1 else (0.0 if ap <= 0 else -np.inf)
         self.log1m_ct = math.log1p(-ct) if 0 < ct < 1 else (0.0 if ct <= 0 else -np.inf)
         self.response = PixelResponse(dcr_cps=self.dcr, q_gate_m2_s=self.q_gate, gate_s=self.gate_s,
-                                      sparse_max_probability=SPARSE_MAX_PROBABILITY,
+                                      dense_min_candidates=DENSE_MIN_CANDIDATES,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
+        self._secondary_per_primary = (ap if ap < 1 else 1.0) + 4 * (ct if ct < 1 else 1.0)
         self._events = np.empty((EVENTS_CAPACITY, 3), np.int64)
         # a call touches at most MAX_KEYFRAMES_PER_CALL + 1 keyframes (the one before its first bin included)
         self._ring = KeyframeRing(flux_tl, MAX_KEYFRAMES_PER_CALL + 1)
@@ -89,6 +90,7 @@ class SpadChunker:
             starts = self.t0 + (k0 + j0 + np.arange(n)) * self.bin_s
             layout = chunk_layout(self._ring, starts, self.gate_s, self.bin_s, self.q_gate)
             seed = int(self.rng.integers(0, 2**63))
+            self._reserve_events(n * H * W)
             n_events = spad_chunk(out[j0 : j0 + n], self._events, layout, self.response, seed)
             if n_events > len(self._events):  # the buffer was short: grow it and draw the same bits again
                 self._events = np.empty((2 * n_events, 3), np.int64)
@@ -105,6 +107,18 @@ class SpadChunker:
         # afterpulses of the very last bin fall outside the recording
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out
+
+    def _reserve_events(self, max_primaries: int) -> None:
+        """Size the secondary-detection buffer for a call of ``max_primaries`` pixel-bins up front.
+
+        Even if every pixel-bin detected, the secondaries exceed their mean + 6 σ with probability ~1e-9, so the
+        kernel practically never runs twice (a short buffer means drawing the whole call again). The buffer is
+        allocated, not written: only the pages the kernel fills are touched.
+        """
+        mean = self._secondary_per_primary * max_primaries
+        need = max(EVENTS_CAPACITY, int(mean + 6.0 * math.sqrt(mean) + 64))
+        if len(self._events) < need:
+            self._events = np.empty((need, 3), np.int64)
 
     def _sub_chunks(self, k0: int, m: int):
         """Split bins so that no kernel call spans more than :data:`MAX_KEYFRAMES_PER_CALL` keyframes.
@@ -177,7 +191,7 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     writer.write_dataset("spad/dcr_cps", dcr, attrs={"units": "counts s-1"})
     bits = writer.append_dataset("spad/bits", (H, (W + 7) // 8), np.uint8,
                                  chunk_rows=min(h5_chunk_bins(H, W), max(n, 1)),
-                                 attrs={"bit_order": "little", "axis_packed": "width"})
+                                 attrs={"bit_order": "little", "axis_packed": "width"}, n_rows=n)
     t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)))
     chunker = SpadChunker(flux_tl, t0, n, resolved, dcr, rng)
     bar = tqdm(total=n, unit="bin", desc="spad", leave=False) if progress else None
