@@ -298,48 +298,47 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
                     d_end = a_off + b_slope * h + trh
                     lin0 = a_off + b_slope * x0
                     t_sig = np.inf
-                    d_sig = 0.0
+                    d_sig = 0.0  # detector value at the signal event: lp there = ref + d_sig − ρ·(t − t_ref)
                     pol = 0
-                    exact = True
-                    if x0 != 0.0:
-                        # The transient c·exp(−x0/τ) lies between c and c·decay (0 < x0 < h): when even these
-                        # bounds, widened by far more than any rounding, keep D strictly inside the thresholds
-                        # on [x0, h], the exact test below could only conclude the same (no signal event), so
-                        # its exp is skipped. This happens after most events (the rest of the step is quiet).
-                        dc_hi = lin0 + max(c, trh) + _BOUND_MARGIN
-                        dc_lo = lin0 + min(c, trh) - _BOUND_MARGIN
-                        if dc_hi < theta_on and dc_lo > -theta_off:
-                            if c >= 0.0:
-                                lin_lo = lin0 if b_slope > 0 else a_off + b_slope * h
-                                exact = d_end >= theta_on or lin_lo + c * decay <= -theta_off
-                            else:
-                                lin_hi = a_off + b_slope * max(x0, h) if b_slope > 0 else lin0
-                                exact = lin_hi + c * decay >= theta_on or d_end <= -theta_off
-                    if exact:
-                        tr0 = c if x0 == 0.0 else c * math.exp(-x0 * inv_tau)
-                        d_cur = lin0 + tr0
-                        d_sig = d_cur  # detector value at the signal event: lp there = ref + d_sig − ρ·(t − t_ref)
-                        if d_cur >= theta_on:
-                            t_sig = cur
-                            pol = 1
-                        elif d_cur <= -theta_off:
-                            t_sig = cur
+                    # D at x0 needs the transient c·exp(−x0/τ), which lies between c and c·decay (0 < x0 < h).
+                    # When even these bounds, widened by far more than any rounding, keep D(x0) strictly inside
+                    # the thresholds, the decisions below are those of the exact value, so its exp waits until a
+                    # search needs it (after most events the rest of the step is quiet and it never does).
+                    if x0 == 0.0:
+                        tr0 = c
+                        d_cur_hi = d_cur_lo = lin0 + c
+                    else:
+                        tr0 = np.nan
+                        d_cur_hi = lin0 + max(c, trh) + _BOUND_MARGIN
+                        d_cur_lo = lin0 + min(c, trh) - _BOUND_MARGIN
+                        if not (d_cur_hi < theta_on and d_cur_lo > -theta_off):
+                            tr0 = c * math.exp(-x0 * inv_tau)
+                            d_cur_hi = d_cur_lo = lin0 + tr0
+                    if d_cur_lo >= theta_on:
+                        t_sig = cur
+                        d_sig = d_cur_lo
+                        pol = 1
+                    elif d_cur_hi <= -theta_off:
+                        t_sig = cur
+                        d_sig = d_cur_hi
+                    else:
+                        # cheap bounds of D on [x0, h] (convex if c > 0, concave if c < 0) before any search
+                        lin_hi = a_off + b_slope * max(x0, h) if b_slope > 0 else lin0
+                        lin_lo = lin0 if b_slope > 0 else a_off + b_slope * h
+                        if c >= 0.0:
+                            upper = max(d_cur_hi, d_end)
+                            lower = lin_lo + c * decay
                         else:
-                            # cheap bounds of D on [x0, h] (convex if c > 0, concave if c < 0) before any search
-                            lin_hi = a_off + b_slope * max(x0, h) if b_slope > 0 else lin0
-                            lin_lo = lin0 if b_slope > 0 else a_off + b_slope * h
-                            if c >= 0.0:
-                                upper = max(d_cur, d_end)
-                                lower = lin_lo + c * decay
-                            else:
-                                upper = lin_hi + c * decay
-                                lower = min(d_cur, d_end)
-                            if upper >= theta_on or lower <= -theta_off:
-                                x_sig, pol = first_crossing(Detector(a_off, b_slope, c, tau), x0, h, d_cur, d_end,
-                                                            theta_on, theta_off, tr0, trh)
-                                if x_sig >= 0.0:
-                                    t_sig = t + x_sig
-                                    d_sig = theta_on if pol == 1 else -theta_off
+                            upper = lin_hi + c * decay
+                            lower = min(d_cur_lo, d_end)
+                        if upper >= theta_on or lower <= -theta_off:
+                            if np.isnan(tr0):
+                                tr0 = c * math.exp(-x0 * inv_tau)
+                            x_sig, pol = first_crossing(Detector(a_off, b_slope, c, tau), x0, h, lin0 + tr0, d_end,
+                                                        theta_on, theta_off, tr0, trh)
+                            if x_sig >= 0.0:
+                                t_sig = t + x_sig
+                                d_sig = theta_on if pol == 1 else -theta_off
                     kind = LABEL_SIGNAL  # which process fires first: signal, shot noise or hot pixel
                     t_next = t_sig
                     # a noise process fires in this step only if its remaining hazard runs out before the
