@@ -86,15 +86,15 @@ class Appender:
     data gives the same bytes whatever the chunking, thread count or executor of the simulator.
     """
 
-    def __init__(self, dataset: h5py.Dataset, presized: bool = False):
+    def __init__(self, dataset: h5py.Dataset):
         self.dataset = dataset
         self.chunk_rows = int(dataset.chunks[0])
-        # A dataset created at its final length (the caller knows it) is filled in place: no resize per chunk
-        self._presized = presized
+        # A dataset created at its final, fixed length (the caller knew it) is filled in place: no resize per chunk
+        self._presized = dataset.maxshape[0] is not None
         # A whole chunk of an unfiltered numeric dataset goes to the file as it is (H5Dwrite_chunk): half the CPU
         # time of a selection write, same bytes in the same place.
         self._direct = dataset.dtype.kind in "biuf" and dataset.id.get_create_plist().get_nfilters() == 0
-        self.n = 0 if presized else dataset.shape[0]
+        self.n = 0 if self._presized else dataset.shape[0]
         self._written = self.n
         self._pending: list[np.ndarray] = []
         self._pending_rows = 0
@@ -258,15 +258,15 @@ class RecordingWriter:
         filled in place (no resize per chunk); exactly ``n_rows`` rows must then be appended.
         """
         tail_shape = tuple(int(s) for s in tail_shape)
-        n_rows = int(n_rows) if n_rows else None  # an empty dataset stays growable (HDF5 has no 0-row chunks)
-        length = (0, None) if n_rows is None else (n_rows, n_rows)
-        if n_rows is not None:
-            chunk_rows = min(int(chunk_rows), max(int(n_rows), 1))  # HDF5: a chunk fits inside fixed dimensions
-        ds = self.h5.create_dataset(name, shape=(length[0], *tail_shape), maxshape=(length[1], *tail_shape),
-                                    dtype=dtype, chunks=(max(1, int(chunk_rows)), *tail_shape),
-                                    compression=compression, track_times=False)
+        chunk_rows = max(1, int(chunk_rows))
+        if n_rows:  # fixed length; an empty dataset stays growable (HDF5 has no 0-row chunks)
+            rows, max_rows, chunk_rows = int(n_rows), int(n_rows), min(chunk_rows, int(n_rows))  # chunk ≤ length
+        else:
+            rows, max_rows = 0, None
+        ds = self.h5.create_dataset(name, shape=(rows, *tail_shape), maxshape=(max_rows, *tail_shape), dtype=dtype,
+                                    chunks=(chunk_rows, *tail_shape), compression=compression, track_times=False)
         for key, value in (attrs or {}).items():
             ds.attrs[key] = _attr_value(value)
-        appender = Appender(ds, presized=n_rows is not None)
+        appender = Appender(ds)
         self._appenders.append(appender)
         return appender

@@ -70,7 +70,7 @@ class SpadChunker:
                                       dense_min_candidates=DENSE_MIN_CANDIDATES,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
-        self._secondary_per_primary = (ap if ap < 1 else 1.0) + 4 * (ct if ct < 1 else 1.0)
+        self._secondary_per_primary = min(ap, 1.0) + 4 * min(ct, 1.0)
         self._events = np.empty((EVENTS_CAPACITY, 3), np.int64)
         # a call touches at most MAX_KEYFRAMES_PER_CALL + 1 keyframes (the one before its first bin included)
         self._ring = KeyframeRing(flux_tl, MAX_KEYFRAMES_PER_CALL + 1)
