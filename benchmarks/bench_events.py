@@ -25,9 +25,10 @@ Two comparisons:
 
 1b. **v2e itself** (optional): v2e's own ``EventEmulator`` (torch on the CPU, the faster of one intra-op thread and
    as many as SimSPAD has numba threads) and SimSPAD, each in a fresh process on the same keyframes, with matched
-   thresholds, cutoff, leak, refractory period and mean shot-noise rate. v2e runs from the venv ``$SIMSPAD_V2E_VENV``
-   (default ``/work/venvs/v2e``: CPU torch, numpy, scipy, h5py, opencv-python-headless, numba, and v2e's
-   ``v2ecore`` package copied from github.com/SensorsINI/v2e into its ``src/``); skipped when it is absent.
+   thresholds, cutoff, leak, refractory period and mean shot-noise rate. v2e runs from the venv
+   ``$SIMSPAD_V2E_VENV`` (default ``.venvs/v2e`` in the repository, git-ignored: CPU torch, numpy, scipy, h5py,
+   opencv-python-headless, numba, and v2e's ``v2ecore`` package copied from github.com/SensorsINI/v2e into its
+   ``src/``); skipped when it is absent.
    Each process runs ``1 + --v2e-repeat`` times: whole-process figures (imports, warm-up, first run) and the best
    warm run (v2e's first run counts too, in its favour). Both outputs are counted as they stream out: v2e's
    per frame, SimSPAD's per sorted time chunk.
@@ -346,7 +347,7 @@ def streaming_memory(size: int, lengths: tuple[int, ...], rate_hz: float) -> lis
 
 #: The venv holding v2e's dependencies (CPU torch) and its ``v2ecore`` sources under ``src/`` (see
 #: :func:`run_v2e`); the v2e section is skipped when it is absent.
-V2E_VENV = Path(os.environ.get("SIMSPAD_V2E_VENV", "/work/venvs/v2e"))
+V2E_VENV = Path(os.environ.get("SIMSPAD_V2E_VENV", Path(__file__).resolve().parent.parent / ".venvs" / "v2e"))
 
 # Runs in the v2e venv. v2e's emulator module imports GUI and file-output helpers at module level (screeninfo,
 # easygui, tkinter, dv_processing, engineering_notation) that emulation never calls; empty stand-ins are put in
