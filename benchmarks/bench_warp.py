@@ -4,8 +4,9 @@ of the linear schedule (``--interpolation linear``, the naive reference), in the
 For every built-in scene (its default trajectory) and for a fast pan with parallax (bench_render.py's textured
 wall + boxes, a yaw burst plus translation) it measures
 
-1. Mitsuba renders per sequence: keyframes rendered (plus the two noise-probe renders of the warp schedule), and
-   the warp schedule's 1-spp depth + id passes (one per synthesized keyframe; the wall-time columns say what
+1. Mitsuba renders per sequence: keyframes rendered (plus the two noise-probe renders of the warp schedule, and
+   the blocks rendered into synthesized keyframes where the warps disagree, counted by their pixel samples as a
+   fraction of a whole render), and the warp schedule's 1-spp depth + id passes (one per synthesized keyframe; the wall-time columns say what
    everything cost);
 2. accuracy: relative RMSE of the timeline's luminance at random instants against converged renders
    (``--ref-spp`` samples, same pose), so Monte Carlo noise counts;
@@ -96,7 +97,10 @@ def run(scene, ts, settings: RenderSettings, out: Path, with_geometry: bool = Fa
     tic = time.perf_counter()
     s = render_sequence(scene, ts, settings, out_dir=out, progress=False)
     tl = Timeline.open(out)
-    n = s.n_keyframes - s.n_warped + (NOISE_PROBE_RENDERS if settings.interpolation == "warp" else 0)
+    warp = tl.meta["schedule"].get("warp", {})
+    # Blocks rendered into synthesized keyframes count by their pixel samples, as a fraction of a whole render.
+    n = (s.n_keyframes - s.n_warped + (NOISE_PROBE_RENDERS if settings.interpolation == "warp" else 0)
+         + float(warp.get("patch_renders", 0.0)))
     if with_geometry:
         geo = int(tl.meta["schedule"].get("warp", {}).get("n_geometry_passes", 0))
         return tl, n, time.perf_counter() - tic, geo
@@ -114,7 +118,7 @@ def compare(name, scene, ts, settings, work: Path, instants, ref_spp, events_spp
     ev_lin, ev_warp = event_counts(tl_lin), event_counts(tl_warp)
     d_on = (ev_warp[0] - ev_lin[0]) / max(ev_lin[0], 1)
     d_off = (ev_warp[1] - ev_lin[1]) / max(ev_lin[1], 1)
-    print(f"{name:<13} {tl_lin.n_keyframes:>4} {n_lin:>6} {n_warp:>6} {geo:>5} {n_lin / n_warp:>6.1f}x "
+    print(f"{name:<13} {tl_lin.n_keyframes:>4} {n_lin:>6} {n_warp:>6.1f} {geo:>5} {n_lin / n_warp:>6.1f}x "
           f"{e_lin * 100:>8.2f} {e_warp * 100:>8.2f} {e_warp / e_lin:>6.2f} "
           f"{ev_lin[0]:>8} {ev_warp[0]:>8} {d_on * 100:>+6.1f}% {ev_lin[1]:>8} {ev_warp[1]:>8} {d_off * 100:>+6.1f}% "
           f"{s_lin:>6.1f} {s_warp:>6.1f}", flush=True)

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from simspad.errors import SimSpadError
+from simspad.render.blocks import block_seed, block_size_px, block_window
 from simspad.render.schedule import focal_length_px
 from simspad.scenes.library import DEFAULT_CAMERA_ID, scene_dict_or_file
 
@@ -29,6 +30,10 @@ from simspad.scenes.library import DEFAULT_CAMERA_ID, scene_dict_or_file
 #: atomic adds in thread order and is not bit-reproducible.
 RECONSTRUCTION_FILTER = {"type": "box"}
 PSF_SIGMA_PX = 0.5
+#: The blur's reach, in σ (scipy's ``truncate``): it reaches round(PSF_TRUNCATE · σ) pixels.
+PSF_TRUNCATE = 4.0
+#: Pixels the blur reaches on each side (scipy's kernel radius).
+PSF_REACH_PX = int(PSF_TRUNCATE * PSF_SIGMA_PX + 0.5)
 #: Depth pass: samples per pixel and the scene-depth percentile that bounds image motion from camera translation.
 DEPTH_SPP = 1
 
@@ -119,6 +124,7 @@ class MitsubaScene:
         near = float(np.asarray(cam_params["near_clip"]).ravel()[0])
         self.near_clip_m = near
         far = float(np.asarray(cam_params["far_clip"]).ravel()[0])
+        self.far_clip_m = far
         self.sensor = mi.load_dict({
             "type": "perspective", "fov": self.x_fov_deg, "fov_axis": "x", "near_clip": near, "far_clip": far,
             "to_world": mi.ScalarTransform4f(self.rest_camera_to_world),
@@ -127,6 +133,8 @@ class MitsubaScene:
             "sampler": {"type": sampler_for(spp), "sample_count": spp},
         })
         self.sensor_params = mi.traverse(self.sensor)
+        self._block_sensor = None  # made on the first render_radiance_block()
+        self._pose = self.rest_camera_to_world
         self.depth_sensor = mi.load_dict({
             "type": "perspective", "fov": self.x_fov_deg, "fov_axis": "x", "near_clip": near, "far_clip": far,
             "to_world": mi.ScalarTransform4f(self.rest_camera_to_world),
@@ -149,6 +157,7 @@ class MitsubaScene:
         self._object_id_of_shape = self._object_id_lookup(shapes)
         self.focal_px = focal_length_px(self.x_fov_deg, width)
         self.width, self.height, self.spp = width, height, spp
+        self.block_px = block_size_px(width, height)  # blocks of render_radiance_block
         x = (np.arange(width) + 0.5 - 0.5 * width) / self.focal_px
         y = (np.arange(height) + 0.5 - 0.5 * height) / self.focal_px
         # Mitsuba's depth AOV is the distance along the ray from the near-clip plane (the perspective sensor starts
@@ -187,7 +196,8 @@ class MitsubaScene:
 
     def set_pose(self, camera_to_world: np.ndarray, object_poses: dict[str, np.ndarray]) -> None:
         mi = self.mi
-        pose = mi.ScalarTransform4f(np.asarray(camera_to_world, dtype=np.float64))
+        self._pose = np.asarray(camera_to_world, dtype=np.float64)
+        pose = mi.ScalarTransform4f(self._pose)
         for params in (self.sensor_params, self.depth_sensor_params):
             params["to_world"] = pose
             params.update()
@@ -211,8 +221,52 @@ class MitsubaScene:
         img = self.mi.render(self.scene, self.params, sensor=self.sensor, seed=seed, spp=self.spp)
         rgb = np.array(img, dtype=np.float32)[..., :3]
         if PSF_SIGMA_PX > 0:
-            rgb = gaussian_filter(rgb, sigma=(PSF_SIGMA_PX, PSF_SIGMA_PX, 0.0), mode="nearest", truncate=4.0)
+            rgb = gaussian_filter(rgb, sigma=(PSF_SIGMA_PX, PSF_SIGMA_PX, 0.0), mode="nearest",
+                                 truncate=PSF_TRUNCATE)
         return np.maximum(rgb, 0.0, dtype=np.float32)
+
+    def render_radiance_block(self, seed: int, row: int, col: int) -> np.ndarray:
+        """Radiance of one block of the image (:mod:`simspad.render.blocks`) at the current pose, as
+        :meth:`render_radiance` gives it up to Monte Carlo noise: the block and a margin as wide as the blur's
+        reach are rendered (with the block's own seed), blurred, and the block's pixels returned
+        ([h, w, 3] float32; blocks on the last row or column may be partial).
+
+        The block is rendered through a second sensor whose film is the block plus its margin, moved over the
+        image by the principal-point offset: changing that offset (a transform) does not recompile Mitsuba's
+        kernel, where a crop offset (a constant of the kernel) would, once per block.
+        """
+        mi = self.mi
+        block_px = self.block_px
+        side = block_px + 2 * PSF_REACH_PX
+        if self._block_sensor is None:
+            self._block_sensor = mi.load_dict({
+                "type": "perspective", "fov": self.x_fov_deg, "fov_axis": "x", "near_clip": self.near_clip_m,
+                "far_clip": self.far_clip_m, "to_world": mi.ScalarTransform4f(self._pose),
+                "film": {"type": "hdrfilm", "width": self.width, "height": self.height, "crop_offset_x": 0,
+                         "crop_offset_y": 0, "crop_width": side, "crop_height": side, "pixel_format": "rgb",
+                         "component_format": "float32", "rfilter": dict(RECONSTRUCTION_FILTER)},
+                "sampler": {"type": sampler_for(self.spp), "sample_count": self.spp},
+            })
+            self._block_params = mi.traverse(self._block_sensor)
+        x0, y0 = col * block_px - PSF_REACH_PX, row * block_px - PSF_REACH_PX
+        params = self._block_params
+        params["to_world"] = mi.ScalarTransform4f(self._pose)
+        params["principal_point_offset_x"] = x0 / self.width
+        params["principal_point_offset_y"] = y0 / self.height
+        params.update()
+        img = np.array(mi.render(self.scene, self.params, sensor=self._block_sensor, seed=block_seed(seed, row, col),
+                                 spp=self.spp), dtype=np.float32)[..., :3]
+        # Only the pixels inside the image: at its border the whole render's blur repeats the edge pixel
+        # (mode "nearest"), which blurring the clipped block with the same mode reproduces.
+        ya, yb = max(y0, 0), min(y0 + side, self.height)
+        xa, xb = max(x0, 0), min(x0 + side, self.width)
+        rgb = img[ya - y0:yb - y0, xa - x0:xb - x0]
+        if PSF_SIGMA_PX > 0:
+            rgb = gaussian_filter(rgb, sigma=(PSF_SIGMA_PX, PSF_SIGMA_PX, 0.0), mode="nearest",
+                                  truncate=PSF_TRUNCATE)
+        rows, cols = block_window(row, col, self.width, self.height, block_px)
+        inner = rgb[rows.start - ya:rows.stop - ya, cols.start - xa:cols.stop - xa]
+        return np.maximum(inner, 0.0, dtype=np.float32)
 
     def render_depth(self, seed: int) -> np.ndarray:
         img = self.mi.render(self.scene, self.params, sensor=self.depth_sensor, integrator=self.depth_integrator,

@@ -65,7 +65,7 @@ from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
 from simspad.render.warp_render import render_with_warps
-from simspad.render.warp_schedule import describe_disagreement
+from simspad.render.warp_schedule import describe_disagreement, describe_patches
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
@@ -349,8 +349,9 @@ def _render_warped(plan: RenderPlan, loaded: LoadedScene, settings: RenderSettin
     sources = tuple(done.plan.sources)
     schedule = dict(plan.timeline["schedule"], interpolation="warp", n_rendered_keyframes=sources.count("render"),
                     warp={"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
-                          "n_geometry_passes": done.n_geometry,
-                          **describe_disagreement(done.plan.disagreement)})
+                          "n_geometry_passes": done.n_geometry, "n_block_renders": done.n_blocks,
+                          **describe_disagreement(done.plan.disagreement),
+                          **describe_patches(done.plan.patched)})
     plan = dataclasses.replace(plan, names=tuple(done.names), sources=sources,
                                timeline=dict(plan.timeline, schedule=schedule))
     return done, plan

@@ -29,7 +29,7 @@ them; the synthesized depth is ``inf`` there again.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import map_coordinates, maximum_filter, spline_filter
@@ -50,6 +50,8 @@ TILE_PX = 8
 TILE_NOISE_FLOOR = 0.5
 #: Fraction of hole pixels that counts as one noise unit of disagreement.
 HOLE_TOLERANCE = 0.01
+#: Tiles past those over the threshold that :meth:`Disagreement.failing_tiles` may add to leave room for holes.
+_EXTRA_RATIO_TILES = 16
 #: Cubic B-spline resampling of radiance: interpolating, so an unmoved pixel keeps its value exactly.
 SPLINE_ORDER = 3
 
@@ -94,12 +96,18 @@ class Disagreement:
         With a noise map: the largest, over :data:`TILE_PX`-pixel tiles, of the RMS difference of the two warps
         ÷ the RMS difference two renders' Monte Carlo noise alone would give there (√2 × the tile's noise);
         about 1 where the warps agree up to noise, whatever part of the frame goes wrong. NaN without one.
+    tile_ratio : ndarray [ceil(H / TILE_PX), ceil(W / TILE_PX)] or None
+        With a noise map: that ratio per tile (0 where too few pixels are seen by both sources to judge).
+    tile_holes : ndarray [ceil(H / TILE_PX), ceil(W / TILE_PX)] or None
+        Hole pixels per tile.
     """
 
     rel_rms: float
     hole_fraction: float
     single_fraction: float
     noise_ratio: float = float("nan")
+    tile_ratio: np.ndarray | None = field(default=None, compare=False, repr=False)
+    tile_holes: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def score(self) -> float:
         """One number to threshold. With a noise map: ``noise_ratio + hole_fraction / HOLE_TOLERANCE`` (in
@@ -107,6 +115,50 @@ class Disagreement:
         if np.isnan(self.noise_ratio):
             return float(self.rel_rms + self.hole_fraction)
         return float(self.noise_ratio + self.hole_fraction / HOLE_TOLERANCE)
+
+    def failing_tiles(self, threshold: float) -> np.ndarray:
+        """The fewest tiles to render for real so that what stays synthesized scores ≤ ``threshold``
+        (:meth:`score_outside`; bool, tile grid): every tile whose ratio exceeds it, then the tiles with the most
+        holes until the holes left fit in what the largest ratio left leaves of the threshold (a few more
+        high-ratio tiles are tried to make that room, whichever needs fewer tiles in all). Needs the tile maps
+        (a noise map was given)."""
+        if self.tile_ratio is None or self.tile_holes is None:
+            raise ValueError("failing_tiles needs the per-tile maps of a synthesis with a noise map")
+        ratio, holes = self.tile_ratio.ravel(), self.tile_holes.ravel().astype(np.float64)
+        total = holes.sum()
+        # Holes as a score: a hole pixel is worth 1 / (pixels · HOLE_TOLERANCE).
+        hole_unit = self.hole_fraction / total / HOLE_TOLERANCE if total else 0.0
+        by_ratio = np.argsort(-ratio, kind="stable")
+        k0 = int(np.count_nonzero(ratio > threshold))
+        best = None
+        for k in range(k0, min(k0 + _EXTRA_RATIO_TILES, ratio.size) + 1):
+            chosen = np.zeros(ratio.size, dtype=bool)
+            chosen[by_ratio[:k]] = True
+            left = float(ratio[by_ratio[k]]) if k < ratio.size else 0.0
+            kept_holes = np.where(chosen, 0.0, holes)
+            budget = threshold - left
+            if budget < 0:
+                continue
+            order = np.argsort(-kept_holes, kind="stable")
+            excess = kept_holes.sum() * hole_unit - budget
+            if excess > 0:
+                removed = np.cumsum(kept_holes[order]) * hole_unit
+                n_more = int(np.searchsorted(removed, excess - 1e-12)) + 1
+                chosen[order[:n_more]] = True
+            if best is None or chosen.sum() < best.sum():
+                best = chosen
+        return best.reshape(self.tile_ratio.shape)
+
+    def score_outside(self, rendered: np.ndarray) -> float:
+        """:meth:`score` of what is left synthesized once the tiles in ``rendered`` (bool, tile grid) are
+        rendered for real."""
+        if self.tile_ratio is None or self.tile_holes is None:
+            raise ValueError("score_outside needs the per-tile maps of a synthesis with a noise map")
+        kept = ~rendered
+        ratio = float(self.tile_ratio[kept].max()) if kept.any() else 0.0
+        total = int(self.tile_holes.sum())
+        holes = self.hole_fraction * float(self.tile_holes[kept].sum()) / total if total else 0.0
+        return float(ratio + holes / HOLE_TOLERANCE)
 
 
 class _Prepared:
@@ -227,24 +279,39 @@ def _same_pose(src: WarpSource, to_camera, to_objects) -> bool:
             and all(np.array_equal(m, n) for m, n in zip(src.object_poses, to_objects)))
 
 
-def _tile_noise_ratio(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -> float:
-    """Largest tile RMS of ``diff`` (where ``both``) over √2 × the tile RMS of ``noise_y`` (floored)."""
-    h, w = diff.shape
+def _tile_sums(a: np.ndarray) -> np.ndarray:
+    """Sum of ``a`` [H, W] over :data:`TILE_PX`-pixel tiles (the last row and column of tiles may be partial)."""
+    h, w = a.shape
     th, tw = -(-h // TILE_PX), -(-w // TILE_PX)
     pad = ((0, th * TILE_PX - h), (0, tw * TILE_PX - w))
+    return np.pad(a, pad).reshape(th, TILE_PX, tw, TILE_PX).sum(axis=(1, 3))
 
-    def tiles(a):
-        return np.pad(a, pad).reshape(th, TILE_PX, tw, TILE_PX).sum(axis=(1, 3))
 
-    n = tiles(both.astype(np.float64))
-    sq = tiles(np.where(both, diff.astype(np.float64) ** 2, 0.0))
-    noise2 = tiles(np.asarray(noise_y, dtype=np.float64) ** 2) / tiles(np.ones((h, w)))
+def _tile_noise_ratios(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -> np.ndarray:
+    """Per tile: RMS of ``diff`` (where ``both``) over √2 × the tile RMS of ``noise_y`` (floored); 0 where fewer
+    than a quarter of the tile's pixels are in ``both``."""
+    n = _tile_sums(both.astype(np.float64))
+    sq = _tile_sums(np.where(both, diff.astype(np.float64) ** 2, 0.0))
+    noise2 = _tile_sums(np.asarray(noise_y, dtype=np.float64) ** 2) / _tile_sums(np.ones(diff.shape))
     floor2 = (TILE_NOISE_FLOOR ** 2) * float(np.mean(np.asarray(noise_y, dtype=np.float64) ** 2))
     enough = n >= TILE_PX * TILE_PX / 4
-    if not enough.any() or floor2 <= 0:
-        return 0.0
-    ratio = np.sqrt(sq[enough] / n[enough] / (2.0 * np.maximum(noise2[enough], floor2)))
-    return float(ratio.max())
+    ratio = np.zeros(n.shape)
+    if floor2 > 0:
+        ratio[enough] = np.sqrt(sq[enough] / n[enough] / (2.0 * np.maximum(noise2[enough], floor2)))
+    return ratio
+
+
+def _tile_noise_ratio(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -> float:
+    """Largest tile RMS of ``diff`` (where ``both``) over √2 × the tile RMS of ``noise_y`` (floored)."""
+    return float(_tile_noise_ratios(diff, both, noise_y).max())
+
+
+def _no_disagreement(camera: PinholeCamera, with_noise: bool) -> Disagreement:
+    """The disagreement of a target that is a rendered keyframe itself."""
+    if not with_noise:
+        return Disagreement(0.0, 0.0, 0.0)
+    grid = (-(-camera.height // TILE_PX), -(-camera.width // TILE_PX))
+    return Disagreement(0.0, 0.0, 0.0, 0.0, np.zeros(grid), np.zeros(grid, dtype=np.int64))
 
 
 def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: float, to_camera: np.ndarray,
@@ -283,7 +350,7 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
         if at and _same_pose(p.src, to_camera, to_objects):  # the target is that rendered keyframe
             ids = None if p.src.object_id is None else np.asarray(p.src.object_id, dtype=np.float32).copy()
             return (np.asarray(p.src.rgb, dtype=np.float32).copy(), np.asarray(p.src.depth_z, np.float32).copy(),
-                    ids, Disagreement(0.0, 0.0, 0.0, float("nan") if noise_y is None else 0.0))
+                    ids, _no_disagreement(camera, noise_y is not None))
     if geometry is None:
         z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
     else:
@@ -308,9 +375,11 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
     rel_rms = (float(np.sqrt(np.mean((ya[both] - yb[both]) ** 2, dtype=np.float64))) / mean_y
                if both.any() and mean_y > 0 else 0.0)
     n = float(z.size)
-    ratio = float("nan") if noise_y is None else _tile_noise_ratio(ya - yb, both, noise_y)
+    tiles = None if noise_y is None else _tile_noise_ratios(ya - yb, both, noise_y)
     dis = Disagreement(rel_rms=rel_rms, hole_fraction=float(hole.sum()) / n,
-                       single_fraction=float((va ^ vb).sum()) / n, noise_ratio=ratio)
+                       single_fraction=float((va ^ vb).sum()) / n,
+                       noise_ratio=float("nan") if tiles is None else float(tiles.max()), tile_ratio=tiles,
+                       tile_holes=None if tiles is None else _tile_sums(hole.astype(np.int64)))
     depth = np.where(z_far >= 0.5 * FAR_DEPTH_M, np.inf, z_far).astype(np.float32)
     has_ids = a.ids is not None or b.ids is not None
     return (rgb.astype(np.float32), depth, ids.astype(np.float32) if has_ids else None, dis)

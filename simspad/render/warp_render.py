@@ -20,11 +20,12 @@ from scipy.ndimage import gaussian_filter
 from simspad.io.exr import read_exr
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
+from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction, tiles_of_blocks
 from simspad.render.flow import object_poses
 from simspad.render.keyframe_files import frame_names, write_frame
-from simspad.render.mitsuba_scene import CompileCounter, MitsubaScene
+from simspad.render.mitsuba_scene import PSF_REACH_PX, CompileCounter, MitsubaScene
 from simspad.render.reprojection import PinholeCamera
-from simspad.render.warp import WarpSource
+from simspad.render.warp import TILE_PX, WarpSource
 from simspad.render.warp_schedule import (
     WARP_STRIDE,
     WARP_THRESHOLD,
@@ -33,7 +34,8 @@ from simspad.render.warp_schedule import (
 )
 
 #: Bumped when synthesized pixels from the same anchors would change: part of their cache key.
-WARP_VERSION = 2  # 2: target geometry from a rendered depth + id pass instead of the forward splat
+WARP_VERSION = 3  # 2: target geometry from a rendered depth + id pass instead of the forward splat; 3: blocks
+# rendered where the warps disagree
 #: Floor of the per-pixel render noise, as a fraction of its mean: a noiseless render (a flat scene) must not make
 #: every synthesized keyframe fail on round-off.
 MIN_NOISE = 0.05
@@ -53,11 +55,43 @@ class WarpedFrames(NamedTuple):
     noise: float  # Monte Carlo noise of one render (RMS ÷ mean luminance), measured at the first keyframe
     n_geometry: int  # depth + id passes rendered for synthesized keyframes
     geometry_s: float  # wall time of those passes, s
+    n_blocks: int  # blocks rendered into synthesized keyframes
+    blocks_s: float  # wall time of those block renders, s
 
 
 def warp_key(base_key: dict, stride: int, threshold: float) -> dict:
     """Cache-key fields of synthesized keyframes."""
     return dict(base_key, warp=WARP_VERSION, warp_stride=int(stride), warp_threshold=float(threshold))
+
+
+class BlockPatcher:
+    """Renders image blocks (:mod:`simspad.render.blocks`) into synthesized keyframes: the
+    :class:`simspad.render.warp_schedule.Patcher` of a Mitsuba scene."""
+
+    def __init__(self, ms: MitsubaScene, pose_of, seed: int):
+        self.ms, self.pose_of, self.seed = ms, pose_of, seed
+        self.n_blocks, self.seconds = 0, 0.0
+
+    def blocks(self, tiles: np.ndarray) -> np.ndarray:
+        return blocks_of_tiles(tiles, self.ms.block_px)
+
+    def tiles(self, blocks: np.ndarray) -> np.ndarray:
+        th, tw = -(-self.ms.height // TILE_PX), -(-self.ms.width // TILE_PX)
+        return tiles_of_blocks(blocks, (th, tw), self.ms.block_px)
+
+    def cost(self, blocks: np.ndarray) -> float:
+        return render_fraction(blocks, self.ms.width, self.ms.height, self.ms.block_px, PSF_REACH_PX)
+
+    def apply(self, i: int, blocks: np.ndarray, rgb: np.ndarray) -> np.ndarray:
+        tic = time.perf_counter()
+        self.ms.set_pose(*self.pose_of(i))
+        out = np.array(rgb, dtype=np.float32, copy=True)
+        for row, col in zip(*np.nonzero(blocks)):
+            out[block_window(row, col, self.ms.width, self.ms.height, self.ms.block_px)] = self.ms.render_radiance_block(
+                self.seed, int(row), int(col))
+            self.n_blocks += 1
+        self.seconds += time.perf_counter() - tic
+        return out
 
 
 def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, cam_poses: np.ndarray,
@@ -111,11 +145,12 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
         noise_y, mean_y = render_noise(ms, ts, float(times[0]), cam_poses[0], seed)
         noise = float(np.sqrt(np.mean(noise_y ** 2)) / mean_y) if mean_y > 0 else 0.0
         noise_y = np.maximum(noise_y, MIN_NOISE * noise_y.mean())  # a noiseless render: round-off is no failure
+    patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed)
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
-                                on_keyframe=lambda i: bar.update(1))
+                                on_keyframe=lambda i: bar.update(1), patch=patcher)
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
-                        noise, len(geometry_times), float(sum(geometry_times)))
+                        noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks, patcher.seconds)
 
 
 def render_noise(ms: MitsubaScene, ts: TrajectorySet, t: float, camera_to_world: np.ndarray, seed: int

@@ -4,8 +4,11 @@ The keyframe instants are those of the linear schedule (:func:`simspad.render.sc
 warp timeline is as dense in time as a linear one; only every ``stride``-th keyframe (and the last) is rendered
 up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesize`;
 if the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.Disagreement.score`),
-the keyframe in the middle is rendered for real and both halves are treated again (recursive bisection), down
-to neighbours. With a ``geometry`` callback (the renderer's 1-spp depth + id pass at each synthesized instant)
+the warps usually disagree in a few places only (a bright textured window behind thin mullions): then, with a
+``patch`` (:class:`Patcher`), just the image blocks holding the failing tiles are rendered for real in every
+keyframe of the segment (the same blocks throughout, so their Monte Carlo noise stays frozen as a whole render's
+does), as long as they cost at most :data:`PATCH_MAX_FRACTION` of a render. Otherwise the keyframe in the middle
+is rendered for real and both halves are treated again (recursive bisection), down to neighbours. With a ``geometry`` callback (the renderer's 1-spp depth + id pass at each synthesized instant)
 the target's depth and ids are rendered rather than splatted from the sources. Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
 ``log2(stride)`` levels of re-synthesis are done per segment, and only two rendered keyframes per level are held
 in memory.
@@ -15,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -28,6 +32,11 @@ WARP_STRIDE = 16
 #: where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
 #: mid-way blend errs by s/√2: a ratio ≤ 2 keeps the blend's error within about √2 × a render's own noise.
 WARP_THRESHOLD = 2.0
+#: Largest cost (pixel samples, as a fraction of a whole render) of the blocks rendered into each keyframe of a
+#: segment whose warps disagree; past it the segment is bisected instead. A quarter: a segment of 15 synthesized
+#: keyframes then costs at most ≈ 4 renders, where bisecting it (warps that disagree in place, not because the
+#: anchors are far apart, disagree again at every level) would render all 15.
+PATCH_MAX_FRACTION = 0.25
 #: ``source`` of a keyframe in ``timeline.json``.
 SOURCE_RENDER, SOURCE_WARP = "render", "warp"
 
@@ -42,6 +51,22 @@ def anchor_indices(n_keyframes: int, stride: int) -> list[int]:
     return idx
 
 
+class Patcher(Protocol):
+    """Renders parts of a synthesized keyframe for real (:meth:`simspad.render.warp_render` gives one)."""
+
+    def blocks(self, tiles: np.ndarray) -> np.ndarray:
+        """The blocks (bool, block grid) that hold ``tiles`` (bool, tile grid of the disagreement)."""
+
+    def tiles(self, blocks: np.ndarray) -> np.ndarray:
+        """The tiles (bool, tile grid) that ``blocks`` cover."""
+
+    def cost(self, blocks: np.ndarray) -> float:
+        """Pixel samples of rendering ``blocks``, as a fraction of a whole render's."""
+
+    def apply(self, i: int, blocks: np.ndarray, rgb: np.ndarray) -> np.ndarray:
+        """``rgb`` of keyframe ``i`` with ``blocks`` rendered for real."""
+
+
 @dataclass
 class WarpPlanResult:
     """What the synthesis did.
@@ -51,15 +76,24 @@ class WarpPlanResult:
     sources : list of str
         ``"render"`` or ``"warp"`` per keyframe.
     disagreement : dict
-        Score of each keyframe that was finally synthesized (index → :class:`Disagreement`).
+        Score of each keyframe that was finally synthesized (index → :class:`Disagreement`), before patching.
+    patched : dict
+        Keyframes with blocks rendered for real: index → (cost as a fraction of a render, score of what stayed
+        synthesized).
     """
 
     sources: list
     disagreement: dict = field(default_factory=dict)
+    patched: dict = field(default_factory=dict)
 
     @property
     def n_rendered(self) -> int:
         return sum(s == SOURCE_RENDER for s in self.sources)
+
+    @property
+    def patch_renders(self) -> float:
+        """Render work of the patched blocks, in whole renders."""
+        return float(sum(cost for cost, _ in self.patched.values()))
 
 
 def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Callable[[int], WarpSource],
@@ -68,7 +102,8 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                          stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
                          noise_y: np.ndarray | None = None,
                          geometry: Callable[[int], tuple] | None = None,
-                         on_keyframe: Callable[[int], None] | None = None) -> WarpPlanResult:
+                         on_keyframe: Callable[[int], None] | None = None,
+                         patch: Patcher | None = None) -> WarpPlanResult:
     """Render the anchors, synthesize the rest, render where the warps disagree.
 
     Parameters
@@ -95,6 +130,9 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         (:func:`simspad.render.warp.synthesize`).
     on_keyframe : callable, optional
         Called with each keyframe index once it is final (progress).
+    patch : Patcher, optional
+        Renders the blocks of a segment's synthesized keyframes where the warps disagree, instead of bisecting,
+        when that costs at most :data:`PATCH_MAX_FRACTION` of a render per keyframe (needs ``noise_y``).
 
     Returns
     -------
@@ -137,6 +175,19 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                 result.disagreement[i] = dis
                 tick(i)
             return
+        if patch is not None and noise_y is not None:
+            failing = np.logical_or.reduce([f[3].failing_tiles(threshold) for f in frames.values()])
+            blocks = patch.blocks(failing)
+            cost = patch.cost(blocks)
+            if cost <= PATCH_MAX_FRACTION:
+                covered = patch.tiles(blocks)
+                for i, (rgb, depth, ids, dis) in frames.items():
+                    write(i, patch.apply(i, blocks, rgb), depth, ids)
+                    geometries.pop(i, None)
+                    result.disagreement[i] = dis
+                    result.patched[i] = (cost, dis.score_outside(covered))
+                    tick(i)
+                return
         del frames
         m = (i0 + i1) // 2
         pm = rendered(m)
@@ -161,5 +212,15 @@ def describe_disagreement(dis: dict) -> dict:
             "max_hole_fraction": float(max(d.hole_fraction for d in dis.values()))}
 
 
-__all__ = ["SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE", "WARP_THRESHOLD", "Disagreement", "WarpPlanResult",
-           "anchor_indices", "describe_disagreement", "synthesize_keyframes"]
+def describe_patches(patched: dict) -> dict:
+    """Summary of the blocks rendered into synthesized keyframes for ``timeline.json``."""
+    if not patched:
+        return {"n_patched": 0, "patch_renders": 0.0}
+    costs = np.array([c for c, _ in patched.values()])
+    return {"n_patched": len(patched), "patch_renders": float(costs.sum()), "max_patch_fraction": float(costs.max()),
+            "max_score_after_patch": float(max(r for _, r in patched.values()))}
+
+
+__all__ = ["PATCH_MAX_FRACTION", "SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE", "WARP_THRESHOLD", "Disagreement",
+           "Patcher", "WarpPlanResult", "anchor_indices", "describe_disagreement", "describe_patches",
+           "synthesize_keyframes"]
