@@ -4,7 +4,7 @@ of the linear schedule (``--interpolation linear``, the naive reference), in the
 For every built-in scene (its default trajectory) and for a fast pan with parallax (bench_render.py's textured
 wall + boxes, a yaw burst plus translation) it measures
 
-1. Mitsuba renders per sequence: keyframes rendered (plus the two noise-probe renders of the warp schedule, and
+1. Mitsuba renders per sequence: keyframes rendered (plus the warp schedule's noise-probe render, and
    the blocks rendered into synthesized keyframes where the warps disagree, counted by their pixel samples as a
    fraction of a whole render), and the warp schedule's 1-spp depth + id passes (one per synthesized keyframe; the wall-time columns say what
    everything cost);
@@ -55,7 +55,7 @@ HERE = Path(__file__).resolve().parent
 LUX = 1000.0
 #: Event camera with its own noise sources off: only radiance changes make events.
 QUIET_EVENTS = replace(EventParams(), shot_noise_rate_hz_at_1lux=0.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0)
-NOISE_PROBE_RENDERS = 2  # render_noise() in render/warp_render.py
+NOISE_PROBE_RENDERS = 1  # render_noise_probe() in render/warp_render.py (keyframe 0 again, next seed)
 
 
 def converged(scene, ts, instants, res, spp) -> dict[float, np.ndarray]:

@@ -62,6 +62,13 @@ class RenderPlan:
     def n_keyframes(self) -> int:
         return len(self.times_s)
 
+    @property
+    def warp(self) -> dict | None:
+        """``{"stride", "threshold"}`` when keyframes are to be synthesized by warping (``--interpolation warp``
+        and a sequence long enough), else None."""
+        schedule = self.timeline.get("schedule", {})
+        return schedule.get("warp") if schedule.get("interpolation") == "warp" else None
+
     def keyframes(self) -> list[dict]:
         """The ``keyframes`` list of ``timeline.json``."""
         keyframes = [{"t": float(t), "file": name, "camera_to_world": [list(row) for row in pose],

@@ -64,12 +64,11 @@ from simspad.render.render_plan import RenderPlan
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
-from simspad.render.warp_render import render_with_warps
-from simspad.render.warp_schedule import describe_disagreement, describe_patches
+from simspad.render.warp_render import chunk_result, merge_chunk_results, render_with_warps
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
-           "load_scene", "plan_render", "render_keyframes", "render_sequence", "select_variant"]
+           "load_scene", "plan_render", "render_keyframes", "render_sequence", "select_variant", "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
 RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
@@ -163,8 +162,14 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     if n_spad_bins is not None:
         schedule["n_spad_bins"] = n_spad_bins
     schedule["max_predicted_flow_px"] = step_flow
-    schedule["interpolation"] = "linear"
+    # Warp needs object ids to move animated objects, and pays a noise-probe render: below two strides of
+    # keyframes it saves nothing, so such short sequences render every keyframe.
+    warp = (settings.interpolation == "warp" and not ms.moves_objects_without_ids
+            and len(times) >= 2 * settings.warp_stride)
+    schedule["interpolation"] = "warp" if warp else "linear"
     schedule["n_rendered_keyframes"] = len(times)
+    if warp:
+        schedule["warp"] = {"stride": int(settings.warp_stride), "threshold": float(settings.warp_threshold)}
     # What reprojection (keyframe synthesis, measured image motion) needs to move animated objects.
     objects_to_world = tuple({k: m.tolist() for k, m in sorted(object_poses(ts, float(t)).items())}
                              for t in times) if ms.object_names else ()
@@ -313,12 +318,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     except BaseException:
         remove_created(created)
         raise
-    # Warp needs object ids to move animated objects, and pays two noise-probe renders: below two strides of
-    # keyframes it saves nothing, so such short sequences render every keyframe.
-    warp = (settings.interpolation == "warp" and not loaded.ms.moves_objects_without_ids
-            and plan.n_keyframes >= 2 * settings.warp_stride)
-    if warp:
-        done, plan = _render_warped(plan, loaded, settings, out_dir, progress)
+    if plan.warp is not None:
+        done, plan = _render_warped(plan, loaded, out_dir, progress)
     else:
         done = render_keyframes(scene, trajectory, plan, range(plan.n_keyframes), out_dir=out_dir,
                                 progress=progress, loaded=loaded)
@@ -334,27 +335,27 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                          frame_times_s=done.frame_times_s, n_warped=list(plan.sources).count("warp"))
 
 
-def _render_warped(plan: RenderPlan, loaded: LoadedScene, settings: RenderSettings, out_dir: Path, progress: bool):
+def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progress: bool):
     """Render sparse keyframes of ``plan`` and synthesize the rest (:mod:`simspad.render.warp_render`); the
     plan comes back with the keyframes' files and sources and the warp schedule in its timeline fields."""
-    times = np.asarray(plan.times_s)
-    cam_poses = np.asarray(plan.camera_to_world)
     loaded.counter.take()  # kernels of loading and depth probes belong to no frame
     bar = _progress(plan.n_keyframes, progress)
     try:
-        done = render_with_warps(loaded.ms, loaded.ts, times, cam_poses, plan.base_key, out_dir, plan.seed,
-                                 loaded.counter, bar, stride=settings.warp_stride, threshold=settings.warp_threshold)
+        done = render_with_warps(loaded.ms, loaded.ts, np.asarray(plan.times_s), np.asarray(plan.camera_to_world),
+                                 plan.base_key, out_dir, plan.seed, loaded.counter, bar, stride=plan.warp["stride"],
+                                 threshold=plan.warp["threshold"])
     finally:
         bar.close()
-    sources = tuple(done.plan.sources)
-    schedule = dict(plan.timeline["schedule"], interpolation="warp", n_rendered_keyframes=sources.count("render"),
-                    warp={"stride": done.stride, "threshold": done.threshold, "render_noise": done.noise,
-                          "n_geometry_passes": done.n_geometry, "n_block_renders": done.n_blocks,
-                          **describe_disagreement(done.plan.disagreement),
-                          **describe_patches(done.plan.patched)})
-    plan = dataclasses.replace(plan, names=tuple(done.names), sources=sources,
+    return done, with_warp_results(plan, [chunk_result(done, 0, plan.n_keyframes - 1)])
+
+
+def with_warp_results(plan: RenderPlan, chunks: list[dict]) -> RenderPlan:
+    """``plan`` with the keyframe files, sources and ``schedule.warp`` fields that the warp chunks reported
+    (:func:`simspad.render.warp_render.chunk_result`, any order): what :func:`finalize_render` then writes."""
+    names, sources, warp = merge_chunk_results(plan.n_keyframes, chunks, plan.warp["stride"], plan.warp["threshold"])
+    schedule = dict(plan.timeline["schedule"], n_rendered_keyframes=sources.count("render"), warp=warp)
+    return dataclasses.replace(plan, names=tuple(names), sources=tuple(sources),
                                timeline=dict(plan.timeline, schedule=schedule))
-    return done, plan
 
 
 class RenderedFrames(NamedTuple):

@@ -17,12 +17,12 @@ from typing import NamedTuple
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from simspad.io.exr import read_exr
+from simspad.io.exr import read_exr, write_exr
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction, tiles_of_blocks
 from simspad.render.flow import object_poses
-from simspad.render.keyframe_files import frame_names, write_frame
+from simspad.render.keyframe_files import frame_key, frame_names, write_frame
 from simspad.render.mitsuba_scene import PSF_REACH_PX, CompileCounter, MitsubaScene
 from simspad.render.reprojection import PinholeCamera
 from simspad.render.warp import TILE_PX, WarpSource
@@ -30,6 +30,8 @@ from simspad.render.warp_schedule import (
     WARP_STRIDE,
     WARP_THRESHOLD,
     WarpPlanResult,
+    describe_patches,
+    describe_scores,
     synthesize_keyframes,
 )
 
@@ -94,10 +96,47 @@ class BlockPatcher:
         return out
 
 
+def noise_probe_name(base_key: dict, times: np.ndarray) -> str:
+    """Relative file of the noise probe: keyframe 0 rendered again with the next seed (not a keyframe)."""
+    return f"frames/noise-probe-{frame_key(dict(base_key, noise_probe=1), float(times[0]))}.exr"
+
+
+def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, cam_poses: np.ndarray,
+                       base_key: dict, out_dir: Path, seed: int) -> bool:
+    """Render the noise probe (keyframe 0's radiance with seed ``seed + 1``) into ``out_dir`` unless it is
+    there; True if it was rendered now."""
+    path = out_dir / noise_probe_name(base_key, times)
+    if path.is_file():
+        return False
+    ms.set_pose(cam_poses[0], object_poses(ts, float(times[0])))
+    rgb = ms.render_radiance(seed + 1)
+    write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+    return True
+
+
+def noise_map(rgb_seed: np.ndarray, rgb_next_seed: np.ndarray) -> tuple[np.ndarray, float]:
+    """Monte Carlo noise of one render per pixel (σ of luminance, absolute, floored at :data:`MIN_NOISE` of its
+    mean) from two renders of the same pose with different seeds (they differ by √2 σ), smoothed over a few
+    pixels so that it is a noise *level* rather than one draw; and that noise's RMS ÷ the mean luminance."""
+    y0 = luminance_from_rgb(np.asarray(rgb_seed)).astype(np.float64)
+    y1 = luminance_from_rgb(np.asarray(rgb_next_seed)).astype(np.float64)
+    noise_y = np.sqrt(gaussian_filter((y1 - y0) ** 2 / 2, NOISE_SMOOTHING_PX, mode="nearest"))
+    mean_y = float(np.mean(y0))
+    noise = float(np.sqrt(np.mean(noise_y ** 2)) / mean_y) if mean_y > 0 else 0.0
+    return np.maximum(noise_y, MIN_NOISE * noise_y.mean()), noise  # a noiseless render: round-off is no failure
+
+
 def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, cam_poses: np.ndarray,
                       base_key: dict, out_dir: Path, seed: int, counter: CompileCounter, bar, *,
-                      stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD) -> WarpedFrames:
-    """Render and synthesize every keyframe at ``times`` into ``out_dir``; ``bar.update(1)`` per keyframe."""
+                      stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
+                      anchors: list[int] | None = None) -> WarpedFrames:
+    """Render and synthesize the keyframes at ``times`` into ``out_dir``; ``bar.update(1)`` per keyframe.
+
+    With ``anchors`` (consecutive anchors of :func:`simspad.render.warp_schedule.anchor_indices`) only the
+    keyframes from the first to the last of them: a chunk of the render, as ``simspad generate`` spreads them
+    over workers. Anchors and the noise probe (:func:`render_noise_probe`) found in ``out_dir`` are re-used; the
+    noise map is computed from keyframe 0's file and the probe's, so every chunk decides with the same numbers.
+    """
     render_names = frame_names(base_key, times)
     warp_names = frame_names(warp_key(base_key, stride, threshold), times)
     names = list(warp_names)
@@ -105,6 +144,8 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
     object_names = ms.object_names
     frame_times, compiled, reused = [], [], [0]
     geometry_times = []
+    first = 0 if anchors is None else anchors[0]
+    ready: dict = {}  # keyframe 0, when rendered or read for the noise map before the schedule asks for it
 
     def poses_of(i: int) -> tuple:
         objects = object_poses(ts, float(times[i]))
@@ -112,6 +153,8 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
 
     def render(i: int) -> WarpSource:
         names[i] = render_names[i]
+        if i in ready:
+            return ready.pop(i)
         path = out_dir / render_names[i]
         if path.is_file():
             reused[0] += 1
@@ -142,23 +185,50 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
     tic = time.perf_counter()
     noise_y, noise = None, 0.0
     if len(times) > 2:
-        noise_y, mean_y = render_noise(ms, ts, float(times[0]), cam_poses[0], seed)
-        noise = float(np.sqrt(np.mean(noise_y ** 2)) / mean_y) if mean_y > 0 else 0.0
-        noise_y = np.maximum(noise_y, MIN_NOISE * noise_y.mean())  # a noiseless render: round-off is no failure
+        if first == 0:
+            ready[0] = render(0)
+            key0 = ready[0].rgb
+        else:
+            key0 = read_exr(out_dir / render_names[0])["rgb"]
+        render_noise_probe(ms, ts, times, cam_poses, base_key, out_dir, seed)
+        noise_y, noise = noise_map(key0, read_exr(out_dir / noise_probe_name(base_key, times))["rgb"])
     patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed)
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
-                                on_keyframe=lambda i: bar.update(1), patch=patcher)
+                                on_keyframe=lambda i: bar.update(1), patch=patcher, anchors=anchors)
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
                         noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks, patcher.seconds)
 
 
-def render_noise(ms: MitsubaScene, ts: TrajectorySet, t: float, camera_to_world: np.ndarray, seed: int
-                 ) -> tuple[np.ndarray, float]:
-    """Monte Carlo noise of one render per pixel (σ of luminance, absolute), from two renders of the same pose
-    with seeds ``seed`` and ``seed + 1`` (they differ by √2 σ), smoothed over a few pixels so that it is a noise
-    *level* rather than one draw; and the mean luminance. Two more renders per sequence; they are not keyframes."""
-    ms.set_pose(camera_to_world, object_poses(ts, t))
-    y0 = luminance_from_rgb(ms.render_radiance(seed)).astype(np.float64)
-    y1 = luminance_from_rgb(ms.render_radiance(seed + 1)).astype(np.float64)
-    return np.sqrt(gaussian_filter((y1 - y0) ** 2 / 2, NOISE_SMOOTHING_PX, mode="nearest")), float(np.mean(y0))
+def chunk_result(done: WarpedFrames, lo: int, hi: int) -> dict:
+    """What a chunk of keyframes ``lo``..``hi`` (anchors included) reports, as plain data for the driver that
+    writes ``timeline.json`` (:func:`merge_chunk_results`)."""
+    plan = done.plan
+    return {"lo": lo, "hi": hi, "names": done.names[lo:hi + 1], "sources": plan.sources[lo:hi + 1],
+            "scores": {int(i): d.score() for i, d in plan.disagreement.items()},
+            "holes": {int(i): d.hole_fraction for i, d in plan.disagreement.items()},
+            "patched": {int(i): list(v) for i, v in plan.patched.items()},
+            "noise": done.noise, "n_geometry": done.n_geometry, "n_blocks": done.n_blocks}
+
+
+def merge_chunk_results(n_keyframes: int, chunks: list[dict], stride: int, threshold: float) -> tuple[list, list, dict]:
+    """Names and sources of every keyframe, and the ``schedule.warp`` fields of ``timeline.json``, from the
+    chunks' :func:`chunk_result` (any order)."""
+    names, sources = [None] * n_keyframes, [None] * n_keyframes
+    scores, holes, patched = {}, {}, {}
+    n_geometry = n_blocks = 0
+    noise = 0.0
+    for c in sorted(chunks, key=lambda c: c["lo"]):
+        names[c["lo"]:c["hi"] + 1] = c["names"]
+        sources[c["lo"]:c["hi"] + 1] = c["sources"]
+        scores.update({int(k): v for k, v in c["scores"].items()})
+        holes.update({int(k): v for k, v in c["holes"].items()})
+        patched.update({int(k): tuple(v) for k, v in c["patched"].items()})
+        n_geometry += c["n_geometry"]
+        n_blocks += c["n_blocks"]
+        noise = c["noise"]
+    if any(n is None for n in names):
+        raise ValueError("the chunks do not cover every keyframe")
+    warp = {"stride": stride, "threshold": threshold, "render_noise": noise, "n_geometry_passes": n_geometry,
+            "n_block_renders": n_blocks, **describe_scores(scores, holes), **describe_patches(patched)}
+    return names, sources, warp

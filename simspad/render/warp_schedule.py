@@ -103,7 +103,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                          noise_y: np.ndarray | None = None,
                          geometry: Callable[[int], tuple] | None = None,
                          on_keyframe: Callable[[int], None] | None = None,
-                         patch: Patcher | None = None) -> WarpPlanResult:
+                         patch: Patcher | None = None, anchors: list[int] | None = None) -> WarpPlanResult:
     """Render the anchors, synthesize the rest, render where the warps disagree.
 
     Parameters
@@ -133,6 +133,10 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     patch : Patcher, optional
         Renders the blocks of a segment's synthesized keyframes where the warps disagree, instead of bisecting,
         when that costs at most :data:`PATCH_MAX_FRACTION` of a render per keyframe (needs ``noise_y``).
+    anchors : list of int, optional
+        Consecutive anchors of :func:`anchor_indices` (``stride`` apart): only the keyframes from the first to
+        the last of them are treated (a chunk of a render spread over processes; the segments between anchors
+        are independent). Default: all.
 
     Returns
     -------
@@ -194,7 +198,8 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         fill(i0, p0, m, pm)
         fill(m, pm, i1, p1)
 
-    anchors = anchor_indices(n, stride)
+    if anchors is None:
+        anchors = anchor_indices(n, stride)
     prev_i, prev_p = anchors[0], rendered(anchors[0])
     for i in anchors[1:]:
         p = rendered(i)
@@ -205,11 +210,16 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
 
 def describe_disagreement(dis: dict) -> dict:
     """Summary of the synthesized keyframes' disagreement for ``timeline.json`` (max and median scores)."""
-    if not dis:
+    return describe_scores({i: d.score() for i, d in dis.items()}, {i: d.hole_fraction for i, d in dis.items()})
+
+
+def describe_scores(scores: dict, holes: dict) -> dict:
+    """:func:`describe_disagreement` from each synthesized keyframe's score and hole fraction (index → value)."""
+    if not scores:
         return {"n_warped": 0}
-    scores = np.array([d.score() for d in dis.values()])
-    return {"n_warped": len(dis), "max_score": float(scores.max()), "median_score": float(np.median(scores)),
-            "max_hole_fraction": float(max(d.hole_fraction for d in dis.values()))}
+    values = np.array([scores[i] for i in sorted(scores)])
+    return {"n_warped": len(scores), "max_score": float(values.max()), "median_score": float(np.median(values)),
+            "max_hole_fraction": float(max(holes.values()))}
 
 
 def describe_patches(patched: dict) -> dict:
@@ -222,5 +232,5 @@ def describe_patches(patched: dict) -> dict:
 
 
 __all__ = ["PATCH_MAX_FRACTION", "SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE", "WARP_THRESHOLD", "Disagreement",
-           "Patcher", "WarpPlanResult", "anchor_indices", "describe_disagreement", "describe_patches",
+           "Patcher", "WarpPlanResult", "anchor_indices", "describe_disagreement", "describe_patches", "describe_scores",
            "synthesize_keyframes"]
