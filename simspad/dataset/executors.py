@@ -7,7 +7,8 @@ write their output atomically, and never raise: they return a dict with ``ok`` a
 ``error``, so an exception that does not pickle cannot hang the job.
 
 Executors expose one small interface used by :mod:`simspad.dataset.generate`:
-``submit_render_plan(task)``, ``submit_render_chunk(task, plan, indices)``, ``submit_simulation(task)``,
+``submit_render_plan(task)``, ``submit_render_chunk(task, plan, indices)``, ``submit_noise_probe(task, plan)`` and
+``submit_warp_chunk(task, plan, anchors)`` (a warp render's second phase), ``submit_simulation(task)``,
 ``wait(futures) -> done``, ``result(future)``, ``slots()`` (how many tasks may run at once) and ``close()``.
 """
 
@@ -27,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from simspad import defaults
 from simspad.dataset.fault_injection import maybe_inject_fault
 from simspad.dataset.speed import sequence_trajectories
@@ -39,6 +42,7 @@ from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import RenderPlan
 from simspad.render.renderer import load_scene, plan_render, render_keyframes
 from simspad.render.settings import RenderSettings
+from simspad.render.warp_render import chunk_result, render_noise_probe, render_with_warps
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
@@ -73,7 +77,8 @@ def _error_result(exc: BaseException, t0: float) -> dict[str, Any]:
 def render_settings_of(task) -> RenderSettings:
     seq = task.sequence
     return RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s, resolution=tuple(seq.resolution),
-                          spp=seq.spp, max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=task.seed)
+                          spp=seq.spp, max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=task.seed,
+                          interpolation=seq.interpolation)
 
 
 def _set_render_threads(threads: int | None) -> None:
@@ -159,6 +164,71 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
                 "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
+
+
+def run_noise_probe(task, plan: dict, out_dir: str, env: dict[str, str], threads: int | None = None) -> dict[str, Any]:
+    """Render the warp schedule's noise probe of a planned render (:func:`~simspad.render.warp_render.render_noise_probe`:
+    keyframe 0 again with the next seed) into ``<out_dir>/<task.rel_dir>``, unless it is there.
+
+    Returns
+    -------
+    dict
+        ``ok``, ``n_rendered`` (0 or 1), ``seconds``, ``cpu_s``, ``host``; or ``ok=False`` and ``error``.
+    """
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        _apply_environment(env)
+        select_variant()
+        _set_render_threads(threads)
+        render_plan = RenderPlan.from_dict(plan)
+        loaded = _cached_scene(task.sequence, task.speed_factor, render_plan)
+        new = render_noise_probe(loaded.ms, loaded.ts, np.asarray(render_plan.times_s),
+                                 np.asarray(render_plan.camera_to_world), render_plan.base_key,
+                                 Path(out_dir) / task.rel_dir, render_plan.seed)
+        return {"ok": True, "n_rendered": int(new), "seconds": time.perf_counter() - t0,
+                "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}
+    except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
+        return _error_result(exc, t0)
+
+
+def run_warp_chunk(task, plan: dict, anchors: list[int], out_dir: str, env: dict[str, str],
+                   threads: int | None = None) -> dict[str, Any]:
+    """Synthesize the keyframes between consecutive ``anchors`` of a planned warp render (their files and the
+    noise probe already there), rendering for real where the warps disagree
+    (:func:`~simspad.render.warp_render.render_with_warps`).
+
+    Returns
+    -------
+    dict
+        ``ok``, ``warp`` (:func:`~simspad.render.warp_render.chunk_result`), ``n_rendered``, ``seconds``, ``cpu_s``,
+        ``host``; or ``ok=False`` and ``error``.
+    """
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        _apply_environment(env)
+        maybe_inject_fault(f"warp:{task.sequence.name}:{anchors[0]}")
+        select_variant()
+        _set_render_threads(threads)
+        render_plan = RenderPlan.from_dict(plan)
+        loaded = _cached_scene(task.sequence, task.speed_factor, render_plan)
+        done = render_with_warps(loaded.ms, loaded.ts, np.asarray(render_plan.times_s),
+                                 np.asarray(render_plan.camera_to_world), render_plan.base_key,
+                                 Path(out_dir) / task.rel_dir, render_plan.seed, loaded.counter, _NoBar(),
+                                 stride=render_plan.warp["stride"], threshold=render_plan.warp["threshold"],
+                                 anchors=list(anchors))
+        return {"ok": True, "warp": chunk_result(done, anchors[0], anchors[-1]),
+                "n_rendered": len(done.frame_times_s), "seconds": time.perf_counter() - t0,
+                "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}
+    except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
+        return _error_result(exc, t0)
+
+
+class _NoBar:
+    """Progress of a chunk is the driver's (it counts the keyframes of finished chunks)."""
+
+    @staticmethod
+    def update(n: int) -> None:
+        pass
 
 
 def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
@@ -267,6 +337,16 @@ class LocalExecutor:
             return self._pool("render").submit(run_render_chunk, task, plan, indices, self.out_dir, self.env,
                                                self.render_threads)
 
+    def submit_noise_probe(self, task, plan: dict):
+        with sigint_blocked():
+            return self._pool("render").submit(run_noise_probe, task, plan, self.out_dir, self.env,
+                                               self.render_threads)
+
+    def submit_warp_chunk(self, task, plan: dict, anchors: list[int]):
+        with sigint_blocked():
+            return self._pool("render").submit(run_warp_chunk, task, plan, anchors, self.out_dir, self.env,
+                                               self.render_threads)
+
     def submit_simulation(self, task):
         with sigint_blocked():
             return self._pool("sim").submit(run_simulation, task, self.out_dir, self.env)
@@ -347,6 +427,14 @@ class DaskExecutor:
         # threads=None: each Dask worker renders with its own thread count (one per single-threaded worker).
         return self.client.submit(run_render_chunk, task, plan, indices, self.out_dir, self.env, None, pure=False,
                                   key=f"render-{task.sequence.name}-{task.render_hash[:12]}-{indices[0]:06d}")
+
+    def submit_noise_probe(self, task, plan: dict):
+        return self.client.submit(run_noise_probe, task, plan, self.out_dir, self.env, None, pure=False,
+                                  key=f"noise-probe-{task.sequence.name}-{task.render_hash[:12]}")
+
+    def submit_warp_chunk(self, task, plan: dict, anchors: list[int]):
+        return self.client.submit(run_warp_chunk, task, plan, anchors, self.out_dir, self.env, None, pure=False,
+                                  key=f"warp-{task.sequence.name}-{task.render_hash[:12]}-{anchors[0]:06d}")
 
     def submit_simulation(self, task):
         return self.client.submit(run_simulation, task, self.out_dir, self.env, pure=False,

@@ -30,7 +30,7 @@ from __future__ import annotations
 import shutil
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -58,7 +58,8 @@ from simspad.errors import SimSpadError
 from simspad.io.atomic import ensure_writable_dir
 from simspad.io.manifest import recording_is_complete
 from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks
-from simspad.render.renderer import finalize_render
+from simspad.render.renderer import finalize_render, with_warp_results
+from simspad.render.warp_schedule import anchor_indices
 
 
 @dataclass
@@ -225,27 +226,43 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                     state = chunked[r.rel_dir] = _ChunkedRender(res["plan"], seconds=res.get("seconds", 0.0),
                                                                 host=res.get("host"))
                     existing = set(res.get("existing", ()))
-                    todo_kf = [i for i in range(res["n_keyframes"]) if i not in existing]
+                    warp = RenderPlan.from_dict(res["plan"]).warp
+                    # A warp render renders its anchors (and a noise probe) first, then synthesizes between them.
+                    wanted = (anchor_indices(res["n_keyframes"], warp["stride"]) if warp
+                              else range(res["n_keyframes"]))
+                    todo_kf = [i for i in wanted if i not in existing]
                     if existing:
                         log(f"render of {r.sequence.name}: {len(existing)} of {res['n_keyframes']} keyframes "
                             "already there (kept from an interrupted run)")
-                    bar_k.total += len(todo_kf)
+                    bar_k.total += res["n_keyframes"] - (len(wanted) - len(todo_kf))
                     bar_k.refresh()
                     chunks = keyframe_chunks(todo_kf, chunk_size_for(len(todo_kf), ex.workers))
                     state.left = len(chunks)
                     for c in chunks:
                         queue.add(Job("chunk", (r, c), lambda r=r, c=c, p=res["plan"]: ex.submit_render_chunk(r, p, c),
                                       label=f"keyframes {c[0]}–{c[-1]} of {r.sequence.name}"))
+                    if warp:
+                        state.anchors = list(wanted)
+                        state.left += 1
+                        queue.add(Job("chunk", (r, []), lambda r=r, p=res["plan"]: ex.submit_noise_probe(r, p),
+                                      label=f"the noise probe of {r.sequence.name}"))
                 else:
                     r, c = job.payload
                     state = chunked[r.rel_dir]
                     state.left -= 1
                     state.seconds += res.get("seconds", 0.0)
                     if res.get("ok"):
-                        bar_k.update(len(c))
+                        if job.kind == "warp":
+                            state.warp_chunks.append(res["warp"])
+                            bar_k.update(c[-1] - c[0] + 1 - len(c))  # the keyframes between its anchors
+                        else:
+                            bar_k.update(len(c))
                     elif state.error is None:
                         state.error = res.get("error")
-                if state.left == 0:
+                if state.left == 0 and state.anchors and not state.warp_started and state.error is None:
+                    state.warp_started = True
+                    _submit_warp_chunks(queue, ex, r, state)
+                elif state.left == 0:
                     final = _finish_render(out_dir, r, state)
                     _render_done(manifest, r, final, waiting, queue, ex, outcome, render_times, bar_s, log)
                     manifest.save()
@@ -266,6 +283,21 @@ class _ChunkedRender:
     host: Any = None
     left: int = 0  # chunks not finished yet
     error: str | None = None  # first chunk error
+    anchors: list = field(default_factory=list)  # a warp render's anchors (empty: linear)
+    warp_started: bool = False  # its synthesis chunks are submitted
+    warp_chunks: list = field(default_factory=list)  # what they reported (chunk_result)
+
+
+def _submit_warp_chunks(queue, ex, r: RenderTask, state: _ChunkedRender) -> None:
+    """A warp render's second phase: runs of consecutive segments between anchors spread over the workers (the
+    segments are independent once their anchors and the noise probe exist)."""
+    anchors = state.anchors
+    groups = keyframe_chunks(range(len(anchors) - 1), chunk_size_for(len(anchors) - 1, ex.workers, largest=8))
+    state.left = len(groups)
+    for g in groups:
+        a = anchors[g[0]:g[-1] + 2]
+        queue.add(Job("warp", (r, a), lambda r=r, a=a, p=state.plan: ex.submit_warp_chunk(r, p, a),
+                      label=f"synthesis of keyframes {a[0]}–{a[-1]} of {r.sequence.name}"))
 
 
 def _finish_render(out_dir: Path, task: RenderTask, state: _ChunkedRender) -> dict:
@@ -274,6 +306,8 @@ def _finish_render(out_dir: Path, task: RenderTask, state: _ChunkedRender) -> di
     if state.error is None:
         try:
             render_plan = RenderPlan.from_dict(state.plan)
+            if state.anchors:
+                render_plan = with_warp_results(render_plan, state.warp_chunks)
             finalize_render(render_plan, out_dir / task.rel_dir)
             res.update(ok=True, n_keyframes=render_plan.n_keyframes)
         except SimSpadError as exc:

@@ -18,6 +18,7 @@ from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.dataset.speed import DEFAULT_SPEEDS, coverage_problem
 from simspad.errors import SimSpadError, SpecError
+from simspad.render.settings import DEFAULT_INTERPOLATION, INTERPOLATIONS
 from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods
@@ -26,7 +27,7 @@ from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, senso
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
 _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
-             "min_rate_hz")
+             "min_rate_hz", "interpolation")
 _EVAL_KEYS = ("rate_hz", "methods")
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _MAX_NAME_CHARS = 100  # names become file names (255 bytes at most, with suffixes)
@@ -291,6 +292,9 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
                        what="pixels > 0")
     min_rate = _number(err, f"{where}.min_rate_hz", t.get("min_rate_hz", defaults.MIN_KEYFRAME_RATE_HZ), positive=True,
                        what="a rate in Hz > 0")
+    interpolation = t.get("interpolation", DEFAULT_INTERPOLATION)
+    if interpolation not in INTERPOLATIONS:
+        err.add(f"{where}.interpolation", f"got {interpolation!r} (expected one of {', '.join(INTERPOLATIONS)})")
     if len(err.lines) > n_errors or name is None:
         return name, None
     _check_trajectory(trajectory, scene, start, duration, where, err)
@@ -298,7 +302,7 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
         return name, None
     return name, SequenceSpec(name=name, scene=scene, trajectory=trajectory, duration_s=duration, start_s=start,
                               resolution=(resolution[0], resolution[1]), spp=spp, max_flow_px=max_flow,
-                              min_rate_hz=min_rate)
+                              min_rate_hz=min_rate, interpolation=interpolation)
 
 
 def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None:

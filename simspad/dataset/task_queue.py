@@ -1,7 +1,7 @@
 """The driver's queue of dataset tasks: priorities, the executor's slots, and one retry for a task whose worker died.
 
-Tasks wait in three queues, served in order: render plans (they unlock chunks), chunks of keyframes (they unlock
-simulations), simulations. At most ``executor.slots()`` run at once, so a local run never starts more processes
+Tasks wait in four queues, served in order: render plans (they unlock chunks), chunks of keyframes (they unlock
+simulations, or a warp render's synthesis chunks), synthesis chunks of warp renders, simulations. At most ``executor.slots()`` run at once, so a local run never starts more processes
 than it has workers.
 
 A worker killed under a task (the OOM killer, a segfault) takes its whole local pool down, and with it the other
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 #: Queues in the order they are served.
-KINDS = ("plan", "chunk", "sim")
+KINDS = ("plan", "chunk", "warp", "sim")
 
 
 @dataclass(eq=False)
