@@ -297,6 +297,7 @@ class Estimate:
     peak_sim_rss_bytes: float | None
     cores: int
     plan_s: float
+    n_warp_keyframes: int = 0  # keyframes of renders with warp interpolation (costed as if all were rendered)
 
     @property
     def cpu_s(self) -> float:
@@ -324,7 +325,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     t0 = time.perf_counter()
     plan = make_plan(spec, "1970-01-01T00:00:00Z")
     keyframe_s, scene_load_s, render_cpu, renders_bytes, largest, render_rss = [], [], 0.0, 0, 0.0, None
-    size_of = {}
+    size_of, n_warp = {}, 0
     for r in plan.renders:
         seq = r.sequence
         rp = plan_render(seq.scene, seq.trajectory, render_settings_of(r))
@@ -333,6 +334,8 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
         keyframe_s.append((per_kf, rp.n_keyframes))
         scene_load_s.append((cost.load_s, rp.n_keyframes))
+        if rp.warp is not None:
+            n_warp += rp.n_keyframes
         render_cpu += per_kf * rp.n_keyframes
         largest = max(largest, per_kf * rp.n_keyframes)
         renders_bytes += int(cost.exr_bytes_per_px * w * h * rp.n_keyframes)
@@ -371,7 +374,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
                     scene_load_s=scene_load_s,
                     disk_bytes=int(rec_bytes) + renders_bytes, recordings_bytes=int(rec_bytes),
                     renders_bytes=renders_bytes, peak_render_rss_bytes=render_rss, peak_sim_rss_bytes=sim_rss,
-                    cores=default_workers(), plan_s=plan_s)
+                    cores=default_workers(), plan_s=plan_s, n_warp_keyframes=n_warp)
 
 
 def free_disk_bytes(path) -> int:
@@ -403,6 +406,9 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
              f"{est.plan_s:.0f} s):",
              f"  renders      {est.n_renders} sequence(s), {est.n_keyframes} keyframes, "
              f"{est.render_cpu_s / 3600:.2f} CPU-h",
+             *([f"               {est.n_warp_keyframes} of them in warp renders, costed as if each were "
+                f"rendered: an upper bound (how many a warp render renders depends on where its warps agree)"]
+               if est.n_warp_keyframes else []),
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",
              f"  total        {est.cpu_s / 3600:.2f} CPU-h",
