@@ -82,7 +82,7 @@ class BlockPatcher:
         return tiles_of_blocks(blocks, (th, tw), self.ms.block_px)
 
     def cost(self, blocks: np.ndarray) -> float:
-        return render_fraction(blocks, self.ms.width, self.ms.height, self.ms.block_px, PSF_REACH_PX)
+        return render_fraction(blocks, self.ms.width, self.ms.height, self.ms.block_px, PSF_REACH_PX, self.ms.spp)
 
     def apply(self, i: int, blocks: np.ndarray, rgb: np.ndarray) -> np.ndarray:
         tic = time.perf_counter()

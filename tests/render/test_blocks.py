@@ -7,6 +7,7 @@ import pytest
 from simspad.motion.generators import static_pose
 from simspad.motion.trajectory import TrajectorySet
 from simspad.render.blocks import (
+    BLOCK_CALL_SAMPLES,
     block_grid,
     block_seed,
     block_size_px,
@@ -37,7 +38,7 @@ def test_block_grid_covers_the_image_once():
     assert blocks.shape == (rows, cols) and np.argwhere(blocks).tolist() == [[1, 2]]
     back = tiles_of_blocks(blocks, tiles.shape, b)
     assert back.shape == tiles.shape and back.sum() == 4 and back[tiles].all()
-    assert render_fraction(blocks, width, height, b, 2) == pytest.approx(20 * 20 / 7000)
+    assert render_fraction(blocks, width, height, b, 2, 16) == pytest.approx((20 * 20 * 16 + BLOCK_CALL_SAMPLES) / (7000 * 16))
     seeds = {block_seed(7, r, c) for r in range(rows) for c in range(cols)}
     assert len(seeds) == rows * cols and all(0 <= s < 2**32 for s in seeds)
     assert block_seed(7, 1, 2) == block_seed(7, 1, 2) != block_seed(8, 1, 2)

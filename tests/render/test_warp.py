@@ -310,7 +310,7 @@ class _TracedBlocks:
         return self.blocks_mod.tiles_of_blocks(blocks, (-(-H // 8), -(-W // 8)), self.b)
 
     def cost(self, blocks):
-        return self.blocks_mod.render_fraction(blocks, W, H, self.b, 0)  # point samples: no blur margin
+        return self.blocks_mod.render_fraction(blocks, W, H, self.b, 0, 1024)  # exact pixels: no blur margin
 
     def apply(self, i, blocks, rgb):
         self.n_applied += 1
