@@ -70,8 +70,8 @@ class BlockPatcher:
     """Renders image blocks (:mod:`simspad.render.blocks`) into synthesized keyframes: the
     :class:`simspad.render.warp_schedule.Patcher` of a Mitsuba scene."""
 
-    def __init__(self, ms: MitsubaScene, pose_of, seed: int):
-        self.ms, self.pose_of, self.seed = ms, pose_of, seed
+    def __init__(self, ms: MitsubaScene, pose_of, seed: int, written=lambda i: False):
+        self.ms, self.pose_of, self.seed, self.written = ms, pose_of, seed, written
         self.n_blocks, self.seconds = 0, 0.0
 
     def blocks(self, tiles: np.ndarray) -> np.ndarray:
@@ -85,6 +85,8 @@ class BlockPatcher:
         return render_fraction(blocks, self.ms.width, self.ms.height, self.ms.block_px, PSF_REACH_PX, self.ms.spp)
 
     def apply(self, i: int, blocks: np.ndarray, rgb: np.ndarray) -> np.ndarray:
+        if self.written(i):  # a resumed render: the file holds these blocks already (and is not written again)
+            return rgb
         tic = time.perf_counter()
         self.ms.set_pose(*self.pose_of(i))
         out = np.array(rgb, dtype=np.float32, copy=True)
@@ -192,7 +194,8 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
             key0 = read_exr(out_dir / render_names[0])["rgb"]
         render_noise_probe(ms, ts, times, cam_poses, base_key, out_dir, seed)
         noise_y, noise = noise_map(key0, read_exr(out_dir / noise_probe_name(base_key, times))["rgb"])
-    patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed)
+    patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed,
+                           lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
                                 on_keyframe=lambda i: bar.update(1), patch=patcher, anchors=anchors)

@@ -73,6 +73,14 @@ def test_warp_render_in_generate_is_chunk_independent(tmp_path):
     assert _frames(single) == _frames(renders[2])
     single_meta = json.loads((single / "timeline.json").read_text())
     assert single_meta["keyframes"] == meta["keyframes"]
+    # Resumed after losing half of its synthesized keyframes and its timeline: the same bytes again.
+    before = _frames(single)
+    for kf in single_meta["keyframes"][1::2]:
+        if kf["source"] == "warp":
+            (single / kf["file"]).unlink()
+    (single / "timeline.json").unlink()
+    render_sequence("fan", None, settings, out_dir=single, progress=False)
+    assert _frames(single) == before
     assert single_meta["schedule"]["warp"] == meta["schedule"]["warp"]  # (generate adds the SPAD-bin comparison)
     # A linear spec renders every keyframe (and its hash, hence its render directory, is the one it always had).
     spec.write_text(SPEC.format(interpolation="linear"))
