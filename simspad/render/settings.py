@@ -19,18 +19,25 @@ from simspad.render.warp_schedule import WARP_STRIDE, WARP_THRESHOLD
 #: Keyframe interpolation modes: synthesize between sparse renders by reprojection, or render every keyframe.
 INTERPOLATIONS = ("warp", "linear")
 #: Default interpolation. "linear" until warp synthesis meets its bar (≥ 8× fewer renders, error no larger, event
-#: counts within 2 % of an all-render timeline) on every built-in scene. Measured at 64×48, 16 spp
-#: (benchmarks/bench_warp.py, 2026-11-23): 2.2–8.2× fewer radiance renders at 0.93–1.01× linear's error; events
-#: within 1.2 % on the fan (since synthesized keyframes take their depth and ids from a rendered geometry pass) and
-#: on the pan, but 6–23 % fewer on the camera-motion scenes. There the all-render timeline's own events are mostly
-#: Monte Carlo noise: under camera motion the fixed-seed noise does not stay frozen (same-pixel noise correlation
-#: 0.67 between neighbouring plant keyframes) and its 16-spp event count is 1.7–2× the 64-spp one (plant: 3344 ON
-#: at 16 spp, 1744 at 64, 1028 at 256); warp's cross-fade between two renders makes fewer such events (and matches
-#: the all-render count within 0.1 % at 256 spp). Over 192 ms (193 keyframes) the same benchmark gives piano 12.9×,
-#: star 6.4×, fan 4.8×, office 2.8×, plant 2.6×. What holds the office back is its window (a textured emitter 40×
-#: brighter than the room, behind thin mullions): 99.5 % of a warp's squared error, above the noise test even
-#: between neighbouring keyframes at 256×192, so whole-keyframe bisection cannot reach 8× there; rendering only the
-#: failing tiles would. Opt in with --interpolation warp.
+#: counts within 2 % of an all-render timeline) on every built-in scene. Measured (benchmarks/bench_warp.py, 16 spp,
+#: render counts include the noise probe and the blocks rendered into synthesized keyframes, in whole renders):
+#: - 64×48 over 192 ms (whole-keyframe bisection only): piano 12.9×, star 6.4×, fan 4.8×, office 2.8×, plant 2.6×
+#:   fewer renders at 0.96–1.05× linear's error.
+#: - 128×96 over 96 ms, blocks rendered where the warps disagree as long as they cost ≤ 1 render per segment: office
+#:   3.9× (without blocks 1.6×) at 1.02× linear's error, plant 1.6× at 0.98×. With blocks wherever they cost ≤ ¼
+#:   render per keyframe (no segment bound) the office reached 4.1× but at 1.09× linear's error, and the fan, star
+#:   and office made 9–16 % more events (a block's frozen noise pattern differs from a whole render's, and
+#:   switches at each segment's ends).
+#: - Events: on camera-motion scenes at 16 spp the all-render timeline's own events are mostly Monte Carlo noise
+#:   (under camera motion the fixed-seed noise does not stay frozen: plant 3344 ON at 16 spp, 1744 at 64, 1028 at
+#:   256); warp's blend of two renders makes fewer such events (and matched the all-render count within 0.1 % at
+#:   256 spp).
+#: - Wall time: at these sizes a block's render call costs 0.05–0.15 s beyond its samples (tracing and launching
+#:   the integrator), so blocks are costed with it (:data:`simspad.render.blocks.BLOCK_CALL_SAMPLES`); at 512²
+#:   and 64 spp, where one office keyframe costs ≈ 60 CPU-s, that is well under 1 %.
+#: The office is bounded by its window (a textured emitter 40× brighter than the room, behind thin mullions):
+#: 99.5 % of a warp's squared error, above the noise test even between neighbouring keyframes. Opt in with
+#: ``--interpolation warp`` (``interpolation = "warp"`` in a dataset spec).
 DEFAULT_INTERPOLATION = "linear"
 
 
