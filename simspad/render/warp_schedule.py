@@ -2,15 +2,16 @@
 
 The keyframe instants are those of the linear schedule (:func:`simspad.render.schedule.keyframe_schedule`), so a
 warp timeline is as dense in time as a linear one; only every ``stride``-th keyframe (and the last) is rendered
-up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesize`;
-if the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.Disagreement.score`),
-the warps usually disagree in a few places only (a bright textured window behind thin mullions): then, with a
-``patch`` (:class:`Patcher`), just the image blocks holding the failing tiles are rendered for real in every
-keyframe of the segment (the same blocks throughout, so their Monte Carlo noise stays frozen as a whole render's
-does), as long as they cost at most :data:`PATCH_MAX_FRACTION` of a render per keyframe and
-:data:`PATCH_MAX_RENDERS` renders over the segment. Otherwise the keyframe in the middle
-is rendered for real and both halves are treated again (recursive bisection), down to neighbours. With a ``geometry`` callback (the renderer's 1-spp depth + id pass at each synthesized instant)
-the target's depth and ids are rendered rather than splatted from the sources. Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
+up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesize`.
+If the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.Disagreement.score`), it
+is usually in a few places only (a bright textured window behind thin mullions): then, with a ``patch``
+(:class:`Patcher`), just the image blocks holding the failing tiles are rendered for real in every keyframe of the
+segment (the same blocks throughout, so their Monte Carlo noise stays frozen as a whole render's does), as long
+as they cost at most :data:`PATCH_MAX_FRACTION` of a render per keyframe and :data:`PATCH_MAX_RENDERS` renders
+over the segment. Otherwise the keyframe in the middle is rendered for real and both halves are treated again
+(recursive bisection), down to neighbours. With a ``geometry`` callback (the renderer's 1-spp depth + id pass at
+each synthesized instant) the target's depth and ids are rendered rather than splatted from the sources.
+Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
 ``log2(stride)`` levels of re-synthesis are done per segment, and only two rendered keyframes per level are held
 in memory.
 """
@@ -56,7 +57,8 @@ def anchor_indices(n_keyframes: int, stride: int) -> list[int]:
 
 
 class Patcher(Protocol):
-    """Renders parts of a synthesized keyframe for real (:meth:`simspad.render.warp_render` gives one)."""
+    """Renders parts of a synthesized keyframe for real (:class:`simspad.render.warp_render.BlockPatcher` for a
+    Mitsuba scene)."""
 
     def blocks(self, tiles: np.ndarray) -> np.ndarray:
         """The blocks (bool, block grid) that hold ``tiles`` (bool, tile grid of the disagreement)."""
@@ -65,7 +67,7 @@ class Patcher(Protocol):
         """The tiles (bool, tile grid) that ``blocks`` cover."""
 
     def cost(self, blocks: np.ndarray) -> float:
-        """Pixel samples of rendering ``blocks``, as a fraction of a whole render's."""
+        """What rendering ``blocks`` costs, as a fraction of a whole render."""
 
     def apply(self, i: int, blocks: np.ndarray, rgb: np.ndarray) -> np.ndarray:
         """``rgb`` of keyframe ``i`` with ``blocks`` rendered for real."""
@@ -236,6 +238,6 @@ def describe_patches(patched: dict) -> dict:
             "max_score_after_patch": float(max(r for _, r in patched.values()))}
 
 
-__all__ = ["PATCH_MAX_FRACTION", "PATCH_MAX_RENDERS", "SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE", "WARP_THRESHOLD", "Disagreement",
-           "Patcher", "WarpPlanResult", "anchor_indices", "describe_disagreement", "describe_patches", "describe_scores",
-           "synthesize_keyframes"]
+__all__ = ["PATCH_MAX_FRACTION", "PATCH_MAX_RENDERS", "SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE",
+           "WARP_THRESHOLD", "Disagreement", "Patcher", "WarpPlanResult", "anchor_indices", "describe_disagreement",
+           "describe_patches", "describe_scores", "synthesize_keyframes"]
