@@ -15,9 +15,9 @@ chunks of them over its workers) and :func:`finalize_render` (``timeline.json``,
 :func:`render_sequence` runs the three in one process.
 
 With ``interpolation = "warp"`` (opt-in, :mod:`simspad.render.settings` says why it is not the default) only
-sparse keyframes are rendered in one process; those between are synthesized by reprojection and rendered for real
-only where the warps disagree (:mod:`simspad.render.warp_render`); ``timeline.json`` marks each keyframe's
-``source``.
+sparse keyframes are rendered; those between are synthesized by reprojection and rendered for real (in blocks or
+whole) only where the warps disagree (:mod:`simspad.render.warp_render`, which also spreads it over processes);
+``timeline.json`` marks each keyframe's ``source``.
 """
 
 from __future__ import annotations

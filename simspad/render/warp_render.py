@@ -5,7 +5,15 @@ keyframe: it renders (or re-uses from the cache) the keyframes :mod:`simspad.ren
 and writes the synthesized ones (:mod:`simspad.render.warp`) as ordinary keyframes of the render directory
 (same EXR layout: R, G, B, Z, and ``object_id`` when the scene animates objects). Rendered keyframes keep the
 names (cache keys) of a linear render, so both schedules share them; synthesized ones are keyed by the same
-fields plus the synthesis version and parameters.
+fields plus the synthesis version and parameters. Where the warps disagree in places, :class:`BlockPatcher`
+renders those blocks (:mod:`simspad.render.blocks`) into the synthesized keyframes.
+
+The render noise the warps are judged against comes from keyframe 0 and one *noise probe* (keyframe 0 again with
+the next seed, kept in the render directory). ``simspad generate`` spreads a warp render over its workers in two
+phases: the anchors (chunks of :func:`simspad.render.renderer.render_keyframes`) and the probe, then runs of
+segments between anchors (:func:`render_with_warps` with ``anchors``), whose reports
+(:func:`chunk_result`) merge into ``timeline.json`` (:func:`merge_chunk_results`); the bytes are those of a
+one-process render.
 """
 
 from __future__ import annotations
