@@ -182,9 +182,9 @@ def spad_chunk(out, events, layout, response, seed):
 
     The sampler is chosen per output byte (8 pixels) by its expected cost: sparse (geometric skips over the
     byte's pixel × bin slots + thinning) while the byte's expected candidates per bin stay below
-    ``response.dense_min_candidates`` or its row has fewer than ``response.dense_min_bytes`` bytes above it
-    (nor all of them), else dense (bin by bin, with z = exp(−Λ) advanced by one multiplication per bin inside a
-    run). The random stream is consumed in that order: row by row, the row's sparse bytes in
+    ``response.dense_min_candidates`` or its row has fewer than ``response.dense_min_bytes`` bytes that reach it
+    (unless those are all of the row's bytes), else dense (bin by bin, with z = exp(−Λ) advanced by one
+    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's sparse bytes in
     raster order, then its dense bytes.
 
     Parameters
