@@ -399,3 +399,39 @@ def test_chunk_layout_weights_give_the_exact_gate_mean():
             exact = q * tl.integrate(float(s), float(s) + gate).astype(np.float64) / gate
             assert np.allclose(lam, exact, rtol=1e-5), (k0, j)
             assert set(lay.term_img[list(terms)]) <= set(lay.slots)  # the call's keyframes bound its gate means
+
+
+def test_sampler_choice_per_row_keeps_every_pixel_binomial():
+    """Wide rows (40 bytes) with a few bright bytes among dim ones: a row with fewer than ``DENSE_MIN_BYTES``
+    bright bytes samples them with the sparse sampler at up to 8·0.9 expected candidates per bin, a row with more
+    mixes both samplers. Every pixel's count follows its own Binomial (χ²) in both kinds of row; for the bright
+    pixels alone, a flux 5 % off is rejected by the same bound."""
+    from simspad.sensors.spad.kernel import DENSE_MIN_BYTES, DENSE_MIN_CANDIDATES
+
+    h, w, n = 8, 320, 6000
+    bright_lam = np.geomspace(0.1, 0.9, 8)  # per pixel of a bright byte: 8·Λ_max ≫ the dense threshold
+    dim_lam = 0.02  # 8·0.02 < the dense threshold: always sparse
+    assert 8 * dim_lam < DENSE_MIN_CANDIDATES < 8 * bright_lam[0]
+    few, many = DENSE_MIN_BYTES // 4, DENSE_MIN_BYTES + 4
+    assert 0 < few < DENSE_MIN_BYTES <= many <= w // 8 - 4  # each kind of row reaches its sampler choice
+    lam = np.full((h, w), dim_lam)
+    bright = np.zeros((h, w), bool)
+    for y in range(h):
+        n_bright = few if y % 2 == 0 else many
+        for xb in np.random.default_rng(y).choice(w // 8, n_bright, replace=False):
+            lam[y, 8 * xb : 8 * xb + 8] = bright_lam
+            bright[y, 8 * xb : 8 * xb + 8] = True
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    q = p.detection_area_m2
+    flux = (lam / (q * BIN_S)).astype(np.float32)
+    tl = Timeline.from_arrays([0.0, 1.0], np.stack([flux, flux]))
+    counts = _counts(SpadChunker(tl, 0.0, n, p, np.zeros((h, w), np.float32), np.random.default_rng(13)), n, w)
+    expected = -np.expm1(-q * BIN_S * flux.astype(np.float64))
+    for rows in (slice(0, h, 2), slice(1, h, 2)):
+        stat, dof, bound = _chi2_ok(counts[rows], expected[rows], n)
+        assert dof - (bound - dof) < stat < bound, (rows, stat, dof, bound)
+        lit = bright[rows]
+        stat, dof, bound = _chi2_ok(counts[rows][lit], expected[rows][lit], n)
+        assert dof - (bound - dof) < stat < bound, (rows, stat, dof, bound)
+        wrong = -np.expm1(-1.05 * q * BIN_S * flux[rows][lit].astype(np.float64))
+        assert _chi2_ok(counts[rows][lit], wrong, n)[0] > bound

@@ -5,7 +5,8 @@ Efficiency
 Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
 are simulated per output byte (8 pixels) by whichever of two exact samplers is expected to be cheaper, from the
 byte's rate bounds (the flux is piecewise linear, so its bounds sit on keyframes): the sparse one while its
-expected candidates per bin stay below :data:`DENSE_MIN_CANDIDATES`, else the dense one.
+expected candidates per bin stay below :data:`DENSE_MIN_CANDIDATES` (or its row has too few such bytes to pay
+for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
 
 - *sparse*: the byte's 8 pixels × m bins form one sequence of candidate slots; geometric skips between
   candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one ziggurat exponential per candidate,
@@ -45,9 +46,13 @@ from simspad.physics.ziggurat import exponential_zig
 from simspad.sensors.spad.dense_bits import M16, dense_bits
 
 #: Per-byte choice of sampler: a byte whose expected sparse candidates per bin reach this uses the dense sampler
-#: (whose cost does not depend on the rates): near the crossover measured with the kernel alone on the scene of
-#: benchmarks/bench_spad.py.
-DENSE_MIN_CANDIDATES = 0.3
+#: (whose cost does not depend on the rates), in rows that have :data:`DENSE_MIN_BYTES` such bytes. Measured with
+#: the kernel alone on the scene of benchmarks/bench_spad.py (CPU ms per 465 bins of 512×512, thresholds
+#: 0.3 / 0.6 with 16 bytes): 15.7 / 14.0 at mean P(1) = 0.001, 73 / 43 at 0.01, ≈ 150 either way at 0.05 and 0.1.
+DENSE_MIN_CANDIDATES = 0.6
+#: Dense bytes a row needs before any of its bytes uses the dense sampler (or all of the row's bytes, if fewer):
+#: the dense loop costs per bin of the row whatever its number of bytes, and a sparse sampler per candidate.
+DENSE_MIN_BYTES = 16
 _TWO16 = 65536.0
 #: Bytes of the sampling buffer (all bins of a block of rows), well inside L2.
 _BLOCK_BYTES = 512 << 10
@@ -92,6 +97,9 @@ class PixelResponse(NamedTuple):
     """Gate, s."""
     dense_min_candidates: float
     """Bytes whose expected sparse candidates per bin reach this use the dense sampler."""
+    dense_min_bytes: int
+    """... but only in rows with at least this many such bytes (the dense loop's cost per bin of a row is not
+    worth paying for a few bytes)."""
     log1m_afterpulse: float
     """ln(1 − afterpulsing probability); 0 when the effect is off."""
     log1m_crosstalk: float
@@ -174,8 +182,9 @@ def spad_chunk(out, events, layout, response, seed):
 
     The sampler is chosen per output byte (8 pixels) by its expected cost: sparse (geometric skips over the
     byte's pixel × bin slots + thinning) while the byte's expected candidates per bin stay below
-    ``response.dense_min_candidates``, else dense (bin by bin, with z = exp(−Λ) advanced by one multiplication
-    per bin inside a run). The random stream is consumed in that order: row by row, the row's sparse bytes in
+    ``response.dense_min_candidates`` or its row has fewer than ``response.dense_min_bytes`` bytes that reach it
+    (unless those are all of the row's bytes), else dense (bin by bin, with z = exp(−Λ) advanced by one
+    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's sparse bytes in
     raster order, then its dense bytes.
 
     Parameters
@@ -224,6 +233,7 @@ def spad_chunk(out, events, layout, response, seed):
     countdown = (ap_left, ct_left)
     n_events = np.int64(0)
     dense_min = response.dense_min_candidates
+    dense_min_bytes = response.dense_min_bytes
     lam_hi = np.empty(8, np.float64)
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
@@ -259,6 +269,18 @@ def spad_chunk(out, events, layout, response, seed):
                 v = images[i, y, x]
                 row_hi[x] = v if v > row_hi[x] else row_hi[x]
                 row_lo[x] = v if v < row_lo[x] else row_lo[x]
+        # the row's bytes that would be dense: none unless there are enough of them to pay for the dense loop
+        n_qualify = 0
+        for xb in range(Wb):
+            hi_byte = 0.0
+            sum_hi = 0.0
+            for x in range(8 * xb, min(8 * xb + 8, W)):
+                lam = q_gate * float(row_hi[x]) + float(dcr[y, x]) * gate_s
+                hi_byte = max(hi_byte, lam)
+                sum_hi += lam
+            if min(8.0 * hi_byte, sum_hi) >= dense_min:
+                n_qualify += 1
+        row_dense_min = dense_min if n_qualify >= min(dense_min_bytes, Wb) else math.inf
         for xb in range(Wb):
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
@@ -278,7 +300,7 @@ def spad_chunk(out, events, layout, response, seed):
             # expected candidates per bin: jointly at the byte's largest rate, or pixel by pixel (a hot pixel among
             # dark ones); the dense sampler costs the same whatever the rates
             joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0
-            if min(8.0 * hi_byte, sum_hi) >= dense_min:
+            if min(8.0 * hi_byte, sum_hi) >= row_dense_min:
                 dense_b[n_dense] = xb
                 n_dense += 1
                 continue

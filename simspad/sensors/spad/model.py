@@ -50,10 +50,13 @@ def dcr_map(shape: tuple[int, int], params: SpadParams, rng: np.random.Generator
     ``hot_pixel_fraction`` of pixels, chosen at random, are hot: log-normal around ``hot_pixel_dcr_cps`` with
     the same σ.
     """
-    hot = rng.random(shape) < params.hot_pixel_fraction
-    median = np.where(hot, params.hot_pixel_dcr_cps, params.dcr_median_cps)
-    dcr = median * np.exp(params.dcr_log_sigma * rng.standard_normal(shape))
-    return dcr.astype(np.float32)
+    # float32 throughout (the map's own precision): half the time of float64 draws and temporaries
+    hot = rng.random(shape, dtype=np.float32) < np.float32(params.hot_pixel_fraction)
+    dcr = rng.standard_normal(shape, dtype=np.float32)
+    dcr *= np.float32(params.dcr_log_sigma)
+    np.exp(dcr, out=dcr)
+    dcr *= np.where(hot, np.float32(params.hot_pixel_dcr_cps), np.float32(params.dcr_median_cps))
+    return dcr
 
 
 def auto_gate(rate_cps, bin_s: float, min_gate_s: float, max_probability: float = 0.9,

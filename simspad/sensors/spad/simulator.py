@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad.kernel import (
+    DENSE_MIN_BYTES,
     DENSE_MIN_CANDIDATES,
     PixelResponse,
     apply_events,
@@ -68,6 +69,7 @@ class SpadChunker:
         self.log1m_ct = math.log1p(-ct) if 0 < ct < 1 else (0.0 if ct <= 0 else -np.inf)
         self.response = PixelResponse(dcr_cps=self.dcr, q_gate_m2_s=self.q_gate, gate_s=self.gate_s,
                                       dense_min_candidates=DENSE_MIN_CANDIDATES,
+                                      dense_min_bytes=DENSE_MIN_BYTES,
                                       log1m_afterpulse=self.log1m_ap, log1m_crosstalk=self.log1m_ct)
         self._carry = np.empty((0, 3), np.int64)
         self._secondary_per_primary = min(ap, 1.0) + 4 * min(ct, 1.0)
