@@ -184,8 +184,8 @@ def spad_chunk(out, events, layout, response, seed):
     byte's pixel × bin slots + thinning) while the byte's expected candidates per bin stay below
     ``response.dense_min_candidates`` or its row has fewer than ``response.dense_min_bytes`` bytes that reach it
     (unless those are all of the row's bytes), else dense (bin by bin, with z = exp(−Λ) advanced by one
-    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's sparse bytes in
-    raster order, then its dense bytes.
+    multiplication per bin inside a run). The random stream is consumed in that order: row by row, the row's
+    sparse bytes in raster order, then its dense bytes.
 
     Parameters
     ----------
