@@ -53,7 +53,8 @@ class Knots(NamedTuple):
     t_s: np.ndarray
     """``[m+1]`` instants, s."""
     current_e_s: np.ndarray
-    """``[H·W, m+1]`` photocurrent, e⁻ s⁻¹: pixel-major, so each pixel's knots are contiguous in memory."""
+    """``[m+1, H·W]`` photocurrent, e⁻ s⁻¹: knot-major, as the timeline gives it (the kernel copies a tile of
+    pixels at a time into pixel-major tables, :mod:`.knot_table`)."""
 
 
 class ModelConstants(NamedTuple):
@@ -188,7 +189,8 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
     n_ev = start
     t_min = np.inf  # readout time range of the pixels done
     t_max = -np.inf
-    # ln I, I^(−γ/2) and the slopes at the knots, a tile of pixels at a time (:mod:`.knot_table`)
+    # I, ln I, I^(−γ/2) and the slopes at the knots, a tile of pixels at a time (:mod:`.knot_table`)
+    tab_current = np.empty((TILE_PIXELS, n_knots))
     tab_log = np.empty((TILE_PIXELS, n_knots))
     tab_g = np.empty((TILE_PIXELS, n_knots))
     tab_slope = np.empty((TILE_PIXELS, max(n_knots - 1, 1)))
@@ -196,8 +198,8 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
     for p in range(p0, p1):
         q = (p - p0) % TILE_PIXELS
         if q == 0:
-            fill_knot_table(knot_t, knot_current, p, min(p + TILE_PIXELS, p1), shot_exp, tab_log, tab_g, tab_slope,
-                            tab_inv_slope)
+            fill_knot_table(knot_t, knot_current, p, min(p + TILE_PIXELS, p1), shot_exp, tab_current, tab_log,
+                            tab_g, tab_slope, tab_inv_slope)
         n_first = n_ev
         pixel_t_min = np.inf
         pixel_t_max = -np.inf
@@ -220,7 +222,7 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
         hz_shot = hzs_state[p]
         hz_hot = hzh_state[p]
         rs = rng_state[p]
-        ib = max(knot_current[p, 0], MIN_CURRENT_E_S)
+        ib = tab_current[q, 0]
         l_b = tab_log[q, 0]  # ln I at the next knot: one log per pixel and knot, none per internal step
         g_b = tab_g[q, 0]  # I^(−γ/2): the shot-noise rate of a step is r₁I₁^γ·g(start)·g(end)
         for j in range(n_knots - 1):
@@ -230,7 +232,7 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
             ia = ib
             l_a = l_b
             g_a = g_b
-            ib = max(knot_current[p, j + 1], MIN_CURRENT_E_S)
+            ib = tab_current[q, j + 1]
             l_b = tab_log[q, j + 1]
             g_b = tab_g[q, j + 1]
             if seg <= 0.0:

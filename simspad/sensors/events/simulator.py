@@ -98,7 +98,7 @@ class EventSimulator:
         """
         pending = self._pending
         knots = Knots(np.ascontiguousarray(knot_t, dtype=np.float64),
-                      np.ascontiguousarray(np.asarray(knot_current, np.float64).T))
+                      np.ascontiguousarray(knot_current, dtype=np.float64))
         merged = self._run_chunk(knots, pending.t_s.size)
         # The held-back events are few (read out after the previous chunk's end): they are merged into the rows
         # left free in front of the new ones, touching only the new events that sort before the last of them.
@@ -127,7 +127,7 @@ class EventSimulator:
         the rest of the block continues in a fresh, larger slice (per-pixel random streams make the result the
         same as one uninterrupted run), so no finished work is redone.
         """
-        n_pix = knots.current_e_s.shape[0]
+        n_pix = knots.current_e_s.shape[1]
         n_blocks = max(1, min(n_pix, 16 * numba.get_num_threads(), -(-n_pix // 256)))
         bounds = np.arange(n_blocks + 1, dtype=np.int64) * n_pix // n_blocks
         pix_lo, pix_hi = bounds[:-1].copy(), bounds[1:].copy()
