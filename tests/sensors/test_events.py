@@ -377,8 +377,9 @@ def test_exact_integrator_is_the_limit_of_a_brute_force_per_frame_simulation(tmp
 
 
 def test_knot_table_matches_the_kernels_own_expressions_bit_for_bit():
-    """The per-tile knot table (ln I, I^(−γ/2), slope, 1/|slope|) equals what the kernel computed in place, bit for
-    bit, including a repeated knot (empty piece), a flat piece and a current below the floor."""
+    """The per-tile knot table (clamped I, ln I, I^(−γ/2), slope, 1/|slope|) equals what the kernel computed in
+    place, bit for bit, including a repeated knot (empty piece), a flat piece and a current below the floor; the
+    photocurrent is read knot-major ([knots, pixels])."""
     from simspad.physics.photoreceptor import MIN_CURRENT_E_S
     from simspad.sensors.events.knot_table import fill_knot_table
 
@@ -390,9 +391,11 @@ def test_knot_table_matches_the_kernels_own_expressions_bit_for_bit():
     gamma = 0.5
     n_tile = 4
     tabs = [np.full((n_tile, knot_t.size), np.nan), np.full((n_tile, knot_t.size), np.nan),
-            np.full((n_tile, knot_t.size - 1), np.nan), np.full((n_tile, knot_t.size - 1), np.nan)]
-    fill_knot_table(knot_t, current, 1, 4, gamma, *tabs)
+            np.full((n_tile, knot_t.size), np.nan), np.full((n_tile, knot_t.size - 1), np.nan),
+            np.full((n_tile, knot_t.size - 1), np.nan)]
+    fill_knot_table(knot_t, np.ascontiguousarray(current.T), 1, 4, gamma, *tabs)
     clamped = np.maximum(current[1:4], MIN_CURRENT_E_S)
+    np.testing.assert_array_equal(tabs.pop(0)[:3], clamped)
     log_i = np.array([[math.log(v) for v in row] for row in clamped])
     np.testing.assert_array_equal(tabs[0][:3], log_i)
     np.testing.assert_array_equal(tabs[1][:3], np.array([[math.exp(-0.5 * gamma * v) for v in row] for row in log_i]))

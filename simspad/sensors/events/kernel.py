@@ -53,7 +53,8 @@ class Knots(NamedTuple):
     t_s: np.ndarray
     """``[m+1]`` instants, s."""
     current_e_s: np.ndarray
-    """``[H·W, m+1]`` photocurrent, e⁻ s⁻¹: pixel-major, so each pixel's knots are contiguous in memory."""
+    """``[m+1, H·W]`` photocurrent, e⁻ s⁻¹: knot-major, as the timeline gives it (the kernel copies a tile of
+    pixels at a time into pixel-major tables, :mod:`.knot_table`)."""
 
 
 class ModelConstants(NamedTuple):
@@ -163,10 +164,12 @@ def init_state(current0, t0, leak_rate_hz, state):
 @numba.njit(cache=True, error_model="numpy")
 def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
     """Advance pixels ``p0 … p1−1`` over the keyframe pieces of one chunk, writing their events (unsorted) into
-    ``buf`` (an :class:`EventBuffer`) from row ``start``. Returns ``(end, p_next)``: the row after the last event
-    written and the first pixel not done (``p1`` when all are). When row ``limit`` is reached inside pixel p, p's
-    events are dropped and its state is left untouched (it is stored only once the pixel is done): ``(row of p's
-    first event, p)``, so the caller can continue from p elsewhere and get exactly what one uninterrupted run gives.
+    ``buf`` (an :class:`EventBuffer`) from row ``start``. Returns ``(end, p_next, t_min, t_max)``: the row after
+    the last event written, the first pixel not done (``p1`` when all are) and the earliest and latest readout time
+    written (s; ``inf``, ``−inf`` when none), so the sort needs no pass to find its time range. When row ``limit``
+    is reached inside pixel p, p's events are dropped and its state is left untouched (it is stored only once the
+    pixel is done): ``(row of p's first event, p, …)``, so the caller can continue from p elsewhere and get exactly
+    what one uninterrupted run gives.
 
     ``knots`` (:class:`Knots`) gives each pixel's photocurrent, linear in time between knots; ``maps`` the fixed
     pattern (:class:`~.model.PixelMaps`), ``model`` the scalars (:class:`ModelConstants`); ``state``
@@ -184,7 +187,10 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
     buf_t, buf_code = buf.t_s, buf.code
     n_knots = knot_t.size
     n_ev = start
-    # ln I, I^(−γ/2) and the slopes at the knots, a tile of pixels at a time (:mod:`.knot_table`)
+    t_min = np.inf  # readout time range of the pixels done
+    t_max = -np.inf
+    # I, ln I, I^(−γ/2) and the slopes at the knots, a tile of pixels at a time (:mod:`.knot_table`)
+    tab_current = np.empty((TILE_PIXELS, n_knots))
     tab_log = np.empty((TILE_PIXELS, n_knots))
     tab_g = np.empty((TILE_PIXELS, n_knots))
     tab_slope = np.empty((TILE_PIXELS, max(n_knots - 1, 1)))
@@ -192,9 +198,11 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
     for p in range(p0, p1):
         q = (p - p0) % TILE_PIXELS
         if q == 0:
-            fill_knot_table(knot_t, knot_current, p, min(p + TILE_PIXELS, p1), shot_exp, tab_log, tab_g, tab_slope,
-                            tab_inv_slope)
+            fill_knot_table(knot_t, knot_current, p, min(p + TILE_PIXELS, p1), shot_exp, tab_current, tab_log,
+                            tab_g, tab_slope, tab_inv_slope)
         n_first = n_ev
+        pixel_t_min = np.inf
+        pixel_t_max = -np.inf
         theta_on = th_on[p]
         theta_off = th_off[p]
         rho = leak_hz[p] * theta_on
@@ -214,7 +222,7 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
         hz_shot = hzs_state[p]
         hz_hot = hzh_state[p]
         rs = rng_state[p]
-        ib = max(knot_current[p, 0], MIN_CURRENT_E_S)
+        ib = tab_current[q, 0]
         l_b = tab_log[q, 0]  # ln I at the next knot: one log per pixel and knot, none per internal step
         g_b = tab_g[q, 0]  # I^(−γ/2): the shot-noise rate of a step is r₁I₁^γ·g(start)·g(end)
         for j in range(n_knots - 1):
@@ -224,7 +232,7 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
             ia = ib
             l_a = l_b
             g_a = g_b
-            ib = max(knot_current[p, j + 1], MIN_CURRENT_E_S)
+            ib = tab_current[q, j + 1]
             l_b = tab_log[q, j + 1]
             g_b = tab_g[q, j + 1]
             if seg <= 0.0:
@@ -389,8 +397,10 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
                     t_out = cur + max(delay, 0.0)
                     t_avail = t_out + blind
                     if n_ev == limit:
-                        return n_first, p
+                        return n_first, p, t_min, t_max
                     buf_t[n_ev] = t_out
+                    pixel_t_min = min(pixel_t_min, t_out)
+                    pixel_t_max = max(pixel_t_max, t_out)
                     buf_code[n_ev] = pack_code(p, pol, label)
                     n_ev += 1
                 lp = lp_e
@@ -405,19 +415,24 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
         hzs_state[p] = hz_shot
         hzh_state[p] = hz_hot
         rng_state[p] = rs
-    return n_ev, p1
+        t_min = min(t_min, pixel_t_min)
+        t_max = max(t_max, pixel_t_max)
+    return n_ev, p1, t_min, t_max
 
 
 @numba.njit(cache=True, parallel=True)
 def simulate_blocks(blocks, knots, maps, model, state, buf):
     """Run the pixel :class:`Blocks` in parallel (arguments otherwise as :func:`run_pixels`).
 
-    Returns each block's end row and first pixel not done (``blocks.pixel_hi[i]`` unless its rows filled up).
+    Returns each block's end row, first pixel not done (``blocks.pixel_hi[i]`` unless its rows filled up) and the
+    earliest and latest readout time it wrote (s; ``inf``, ``−inf`` when none).
     """
     n_blocks = blocks.pixel_lo.size
     ends = np.empty(n_blocks, np.int64)
     p_next = np.empty(n_blocks, np.int64)
+    t_min = np.empty(n_blocks)
+    t_max = np.empty(n_blocks)
     for b in numba.prange(n_blocks):
-        ends[b], p_next[b] = run_pixels(blocks.pixel_lo[b], blocks.pixel_hi[b], blocks.start[b], blocks.limit[b],
-                                        knots, maps, model, state, buf)
-    return ends, p_next
+        ends[b], p_next[b], t_min[b], t_max[b] = run_pixels(blocks.pixel_lo[b], blocks.pixel_hi[b], blocks.start[b],
+                                                            blocks.limit[b], knots, maps, model, state, buf)
+    return ends, p_next, t_min, t_max

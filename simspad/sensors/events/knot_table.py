@@ -21,36 +21,41 @@ TILE_PIXELS = 32
 
 
 @numba.njit(cache=True, error_model="numpy")
-def fill_knot_table(knot_t, knot_current, p_lo, p_hi, shot_exp, log_i, g_i, slope, inv_abs_slope):
+def fill_knot_table(knot_t, knot_current, p_lo, p_hi, shot_exp, current_i, log_i, g_i, slope, inv_abs_slope):
     """Fill rows ``0 … p_hi − p_lo − 1`` of the tables for pixels ``p_lo … p_hi − 1``.
+
+    The photocurrent comes knot-major, as the timeline gives it (no transposed copy of a chunk is made): a tile
+    reads a short contiguous run of each knot's row, and from then on the kernel reads only the tile's tables.
 
     Parameters
     ----------
     knot_t : ndarray [m+1]
         Knot instants, s.
-    knot_current : ndarray [H·W, m+1]
-        Photocurrent at the knots, e⁻ s⁻¹ (clamped to ``MIN_CURRENT_E_S`` here, as in the kernel).
+    knot_current : ndarray [m+1, H·W]
+        Photocurrent at the knots, e⁻ s⁻¹.
     shot_exp : float
         ``γ``, the shot-noise exponent.
-    log_i, g_i : ndarray [tile, m+1]
-        Out: ``ln I`` and ``I^(−γ/2) = exp(−γ/2 · ln I)`` at each knot.
+    current_i, log_i, g_i : ndarray [tile, m+1]
+        Out: the photocurrent clamped to ``MIN_CURRENT_E_S`` (e⁻ s⁻¹), ``ln I`` and ``I^(−γ/2) = exp(−γ/2 · ln I)``
+        at each knot.
     slope, inv_abs_slope : ndarray [tile, m]
         Out: ``dI/dt`` over each piece (e⁻ s⁻²; 0 for an empty piece) and ``1/|dI/dt|`` (0 where the slope is 0).
     """
     n_knots = knot_t.size
-    for q in range(p_hi - p_lo):
-        p = p_lo + q
-        ia = max(knot_current[p, 0], MIN_CURRENT_E_S)
-        lg = math.log(ia)
-        log_i[q, 0] = lg
-        g_i[q, 0] = math.exp(-0.5 * shot_exp * lg)
-        for j in range(n_knots - 1):
-            ib = max(knot_current[p, j + 1], MIN_CURRENT_E_S)
+    n = p_hi - p_lo
+    # knot by knot, the tile's pixels inner: each knot's row is read as one contiguous run (rows a multiple of 4 KiB
+    # apart, read pixel by pixel, would all fall in the same L1 cache set)
+    for j in range(n_knots):
+        row = knot_current[j, p_lo:p_hi]
+        for q in range(n):
+            ib = max(row[q], MIN_CURRENT_E_S)
+            current_i[q, j] = ib
             lg = math.log(ib)
-            log_i[q, j + 1] = lg
-            g_i[q, j + 1] = math.exp(-0.5 * shot_exp * lg)
-            seg = knot_t[j + 1] - knot_t[j]
-            s = (ib - ia) / seg if seg > 0.0 else 0.0
+            log_i[q, j] = lg
+            g_i[q, j] = math.exp(-0.5 * shot_exp * lg)
+    for j in range(n_knots - 1):
+        seg = knot_t[j + 1] - knot_t[j]
+        for q in range(n):
+            s = (current_i[q, j + 1] - current_i[q, j]) / seg if seg > 0.0 else 0.0
             slope[q, j] = s
             inv_abs_slope[q, j] = 1.0 / abs(s) if s != 0.0 else 0.0
-            ia = ib

@@ -98,7 +98,7 @@ class EventSimulator:
         """
         pending = self._pending
         knots = Knots(np.ascontiguousarray(knot_t, dtype=np.float64),
-                      np.ascontiguousarray(np.asarray(knot_current, np.float64).T))
+                      np.ascontiguousarray(knot_current, dtype=np.float64))
         merged = self._run_chunk(knots, pending.t_s.size)
         # The held-back events are few (read out after the previous chunk's end): they are merged into the rows
         # left free in front of the new ones, touching only the new events that sort before the last of them.
@@ -127,7 +127,7 @@ class EventSimulator:
         the rest of the block continues in a fresh, larger slice (per-pixel random streams make the result the
         same as one uninterrupted run), so no finished work is redone.
         """
-        n_pix = knots.current_e_s.shape[0]
+        n_pix = knots.current_e_s.shape[1]
         n_blocks = max(1, min(n_pix, 16 * numba.get_num_threads(), -(-n_pix // 256)))
         bounds = np.arange(n_blocks + 1, dtype=np.int64) * n_pix // n_blocks
         pix_lo, pix_hi = bounds[:-1].copy(), bounds[1:].copy()
@@ -137,9 +137,12 @@ class EventSimulator:
         used_rows = n_blocks * room
         self._buffers(used_rows)
         seg_pix, seg_start, seg_end, seg_block = [], [], [], []  # finished buffer segments, each a pixel range
+        t_min, t_max = math.inf, -math.inf  # readout time range of the events written
         while True:
-            ends, p_next = simulate_blocks(Blocks(pix_lo, pix_hi, starts, starts + room), knots, self.maps,
-                                           self.model, self.state, self._buf)
+            ends, p_next, block_t_min, block_t_max = simulate_blocks(Blocks(pix_lo, pix_hi, starts, starts + room),
+                                                                     knots, self.maps, self.model, self.state,
+                                                                     self._buf)
+            t_min, t_max = min(t_min, float(block_t_min.min())), max(t_max, float(block_t_max.max()))
             seg_pix.append(pix_lo)
             seg_start.append(starts)
             seg_end.append(ends)
@@ -163,7 +166,7 @@ class EventSimulator:
         counts = ends - starts
         per_block = np.bincount(np.concatenate(seg_block)[order], weights=counts, minlength=n_blocks)
         self._cap = max(1024, int(per_block.max()) * n_blocks)
-        return sort_segments(starts, ends, self._buf, n_pix, lead, numba.get_num_threads())
+        return sort_segments(starts, ends, self._buf, n_pix, lead, numba.get_num_threads(), (t_min, t_max))
 
 
 def iter_knot_chunks(flux_tl, t0: float, t1: float, params: EventParams, max_bytes: int = CHUNK_BYTES,

@@ -56,13 +56,19 @@ def sort_events(t_us: np.ndarray, pixel: np.ndarray, n_pix: int) -> np.ndarray:
 
 
 def sort_segments(starts: np.ndarray, ends: np.ndarray, buf: EventBuffer, n_pix: int, lead: int,
-                  n_threads: int) -> EventColumns:
+                  n_threads: int, t_range_s: tuple[float, float] | None = None) -> EventColumns:
     """The events in buffer rows ``[starts[i], ends[i])`` (segments in pixel order), sorted by (µs, pixel) after
-    ``lead`` rows left uninitialised (room for :func:`merge_front`)."""
+    ``lead`` rows left uninitialised (room for :func:`merge_front`).
+
+    ``t_range_s``: the earliest and latest of their times (s) when the caller knows them (the kernel tracks them
+    as it writes), which saves a pass over the events; found here when None."""
     counts = ends - starts
     if counts.sum() == 0:
         return EventColumns.empty(lead)
-    t_lo, t_hi = _us_range(starts, ends, buf.t_s, n_threads)
+    if t_range_s is None:
+        t_lo, t_hi = _us_range(starts, ends, buf.t_s, n_threads)
+    else:  # floor(t·10⁶) is monotone in t: the range's ends are those of the events' µs timestamps
+        t_lo, t_hi = (math.floor(t * 1e6) for t in t_range_s)
     span = t_hi - t_lo + 1
     if span <= 4 * int(counts.sum()) + (1 << 20):
         # One histogram of span buckets per part: fewer parts (down to one, a serial pass) when that is large.
