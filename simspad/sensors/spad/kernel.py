@@ -238,6 +238,7 @@ def spad_chunk(out, events, layout, response, seed):
     lam_lo = np.empty(8, np.float64)
     lo_bound = np.empty(8, np.float64)
     dense_b = np.empty(Wb, np.int64)
+    byte_candidates = np.empty(Wb, np.float64)  # per byte of the row: expected sparse candidates per bin
     row_hi = np.empty(W, np.float32)
     row_lo = np.empty(W, np.float32)
     lam_row = np.empty(W, np.float64)
@@ -269,7 +270,9 @@ def spad_chunk(out, events, layout, response, seed):
                 v = images[i, y, x]
                 row_hi[x] = v if v > row_hi[x] else row_hi[x]
                 row_lo[x] = v if v < row_lo[x] else row_lo[x]
-        # the row's bytes that would be dense: none unless there are enough of them to pay for the dense loop
+        # expected candidates per bin of each byte: jointly at the byte's largest rate, or pixel by pixel (a hot
+        # pixel among dark ones); the row's bytes that reach dense_min go dense only if there are enough of them
+        # to pay for the dense loop
         n_qualify = 0
         for xb in range(Wb):
             hi_byte = 0.0
@@ -278,10 +281,16 @@ def spad_chunk(out, events, layout, response, seed):
                 lam = q_gate * float(row_hi[x]) + float(dcr[y, x]) * gate_s
                 hi_byte = max(hi_byte, lam)
                 sum_hi += lam
-            if min(8.0 * hi_byte, sum_hi) >= dense_min:
+            byte_candidates[xb] = min(8.0 * hi_byte, sum_hi)
+            if byte_candidates[xb] >= dense_min:
                 n_qualify += 1
         row_dense_min = dense_min if n_qualify >= min(dense_min_bytes, Wb) else math.inf
         for xb in range(Wb):
+            # the dense sampler costs the same whatever the rates
+            if byte_candidates[xb] >= row_dense_min:
+                dense_b[n_dense] = xb
+                n_dense += 1
+                continue
             x_end = min(8, W - 8 * xb)
             hi_byte = 0.0
             sum_hi = 0.0
@@ -297,13 +306,7 @@ def spad_chunk(out, events, layout, response, seed):
                 lam_lo[bit] = max(q_gate * lo + dark, 0.0)
                 hi_byte = max(hi_byte, lam_hi[bit])
                 sum_hi += lam_hi[bit]
-            # expected candidates per bin: jointly at the byte's largest rate, or pixel by pixel (a hot pixel among
-            # dark ones); the dense sampler costs the same whatever the rates
             joint = 8.0 * m * hi_byte <= m * sum_hi + 7.0
-            if min(8.0 * hi_byte, sum_hi) >= row_dense_min:
-                dense_b[n_dense] = xb
-                n_dense += 1
-                continue
             if hi_byte <= 0.0:
                 continue
             # sparse: candidate slots over the byte's 8 pixels × m bins (s = 8·k + bit) at the byte's largest rate,
