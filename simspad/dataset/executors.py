@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from tqdm import tqdm
 
 from simspad import defaults
 from simspad.dataset.fault_injection import maybe_inject_fault
@@ -166,6 +166,16 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         return _error_result(exc, t0)
 
 
+def _warp_worker(task, plan: dict, env: dict[str, str], threads: int | None):
+    """A worker's set-up for a warp render's tasks: environment, variant, render threads; the plan and the scene
+    (this process's cached one when it rendered the same sequence before)."""
+    _apply_environment(env)
+    select_variant()
+    _set_render_threads(threads)
+    render_plan = RenderPlan.from_dict(plan)
+    return render_plan, _cached_scene(task.sequence, task.speed_factor, render_plan)
+
+
 def run_noise_probe(task, plan: dict, out_dir: str, env: dict[str, str], threads: int | None = None) -> dict[str, Any]:
     """Render the warp schedule's noise probe of a planned render (:func:`~simspad.render.warp_render.render_noise_probe`:
     keyframe 0 again with the next seed) into ``<out_dir>/<task.rel_dir>``, unless it is there.
@@ -177,14 +187,8 @@ def run_noise_probe(task, plan: dict, out_dir: str, env: dict[str, str], threads
     """
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        _apply_environment(env)
-        select_variant()
-        _set_render_threads(threads)
-        render_plan = RenderPlan.from_dict(plan)
-        loaded = _cached_scene(task.sequence, task.speed_factor, render_plan)
-        new = render_noise_probe(loaded.ms, loaded.ts, np.asarray(render_plan.times_s),
-                                 np.asarray(render_plan.camera_to_world), render_plan.base_key,
-                                 Path(out_dir) / task.rel_dir, render_plan.seed)
+        render_plan, loaded = _warp_worker(task, plan, env, threads)
+        new = render_noise_probe(loaded.ms, loaded.ts, render_plan, Path(out_dir) / task.rel_dir)
         return {"ok": True, "n_rendered": int(new), "seconds": time.perf_counter() - t0,
                 "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
@@ -205,30 +209,16 @@ def run_warp_chunk(task, plan: dict, anchors: list[int], out_dir: str, env: dict
     """
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        _apply_environment(env)
         maybe_inject_fault(f"warp:{task.sequence.name}:{anchors[0]}")
-        select_variant()
-        _set_render_threads(threads)
-        render_plan = RenderPlan.from_dict(plan)
-        loaded = _cached_scene(task.sequence, task.speed_factor, render_plan)
-        done = render_with_warps(loaded.ms, loaded.ts, np.asarray(render_plan.times_s),
-                                 np.asarray(render_plan.camera_to_world), render_plan.base_key,
-                                 Path(out_dir) / task.rel_dir, render_plan.seed, loaded.counter, _NoBar(),
-                                 stride=render_plan.warp["stride"], threshold=render_plan.warp["threshold"],
-                                 anchors=list(anchors))
+        render_plan, loaded = _warp_worker(task, plan, env, threads)
+        # the driver counts the keyframes of finished chunks: no bar here
+        done = render_with_warps(loaded.ms, loaded.ts, render_plan, Path(out_dir) / task.rel_dir, loaded.counter,
+                                 tqdm(disable=True), anchors=list(anchors))
         return {"ok": True, "warp": chunk_result(done, anchors[0], anchors[-1]),
                 "n_rendered": len(done.frame_times_s), "seconds": time.perf_counter() - t0,
                 "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
-
-
-class _NoBar:
-    """Progress of a chunk is the driver's (it counts the keyframes of finished chunks)."""
-
-    @staticmethod
-    def update(n: int) -> None:
-        pass
 
 
 def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:

@@ -341,9 +341,7 @@ def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progres
     loaded.counter.take()  # kernels of loading and depth probes belong to no frame
     bar = _progress(plan.n_keyframes, progress)
     try:
-        done = render_with_warps(loaded.ms, loaded.ts, np.asarray(plan.times_s), np.asarray(plan.camera_to_world),
-                                 plan.base_key, out_dir, plan.seed, loaded.counter, bar, stride=plan.warp["stride"],
-                                 threshold=plan.warp["threshold"])
+        done = render_with_warps(loaded.ms, loaded.ts, plan, out_dir, loaded.counter, bar)
     finally:
         bar.close()
     return done, with_warp_results(plan, [chunk_result(done, 0, plan.n_keyframes - 1)])

@@ -301,11 +301,6 @@ def _tile_noise_ratios(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) 
     return ratio
 
 
-def _tile_noise_ratio(diff: np.ndarray, both: np.ndarray, noise_y: np.ndarray) -> float:
-    """Largest tile RMS of ``diff`` (where ``both``) over √2 × the tile RMS of ``noise_y`` (floored)."""
-    return float(_tile_noise_ratios(diff, both, noise_y).max())
-
-
 def _no_disagreement(camera: PinholeCamera, with_noise: bool) -> Disagreement:
     """The disagreement of a target that is a rendered keyframe itself."""
     if not with_noise:

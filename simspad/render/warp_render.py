@@ -32,11 +32,10 @@ from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction
 from simspad.render.flow import object_poses
 from simspad.render.keyframe_files import frame_key, frame_names, write_frame
 from simspad.render.mitsuba_scene import PSF_REACH_PX, CompileCounter, MitsubaScene
+from simspad.render.render_plan import RenderPlan
 from simspad.render.reprojection import PinholeCamera
-from simspad.render.warp import TILE_PX, WarpSource
+from simspad.render.warp import WarpSource
 from simspad.render.warp_schedule import (
-    WARP_STRIDE,
-    WARP_THRESHOLD,
     WarpPlanResult,
     describe_patches,
     describe_scores,
@@ -85,9 +84,8 @@ class BlockPatcher:
     def blocks(self, tiles: np.ndarray) -> np.ndarray:
         return blocks_of_tiles(tiles, self.ms.block_px)
 
-    def tiles(self, blocks: np.ndarray) -> np.ndarray:
-        th, tw = -(-self.ms.height // TILE_PX), -(-self.ms.width // TILE_PX)
-        return tiles_of_blocks(blocks, (th, tw), self.ms.block_px)
+    def tiles(self, blocks: np.ndarray, tile_shape: tuple[int, int]) -> np.ndarray:
+        return tiles_of_blocks(blocks, tile_shape, self.ms.block_px)
 
     def cost(self, blocks: np.ndarray) -> float:
         return render_fraction(blocks, self.ms.width, self.ms.height, self.ms.block_px, PSF_REACH_PX, self.ms.spp)
@@ -106,20 +104,19 @@ class BlockPatcher:
         return out
 
 
-def noise_probe_name(base_key: dict, times: np.ndarray) -> str:
+def noise_probe_name(plan: RenderPlan) -> str:
     """Relative file of the noise probe: keyframe 0 rendered again with the next seed (not a keyframe)."""
-    return f"frames/noise-probe-{frame_key(dict(base_key, noise_probe=1), float(times[0]))}.exr"
+    return f"frames/noise-probe-{frame_key(dict(plan.base_key, noise_probe=1), plan.times_s[0])}.exr"
 
 
-def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, cam_poses: np.ndarray,
-                       base_key: dict, out_dir: Path, seed: int) -> bool:
-    """Render the noise probe (keyframe 0's radiance with seed ``seed + 1``) into ``out_dir`` unless it is
+def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out_dir: Path) -> bool:
+    """Render the noise probe (keyframe 0's radiance with the plan's seed + 1) into ``out_dir`` unless it is
     there; True if it was rendered now."""
-    path = out_dir / noise_probe_name(base_key, times)
+    path = out_dir / noise_probe_name(plan)
     if path.is_file():
         return False
-    ms.set_pose(cam_poses[0], object_poses(ts, float(times[0])))
-    rgb = ms.render_radiance(seed + 1)
+    ms.set_pose(np.asarray(plan.camera_to_world[0]), object_poses(ts, plan.times_s[0]))
+    rgb = ms.render_radiance(plan.seed + 1)
     write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
     return True
 
@@ -136,19 +133,20 @@ def noise_map(rgb_seed: np.ndarray, rgb_next_seed: np.ndarray) -> tuple[np.ndarr
     return np.maximum(noise_y, MIN_NOISE * noise_y.mean()), noise  # a noiseless render: round-off is no failure
 
 
-def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, cam_poses: np.ndarray,
-                      base_key: dict, out_dir: Path, seed: int, counter: CompileCounter, bar, *,
-                      stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
-                      anchors: list[int] | None = None) -> WarpedFrames:
-    """Render and synthesize the keyframes at ``times`` into ``out_dir``; ``bar.update(1)`` per keyframe.
+def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out_dir: Path, counter: CompileCounter,
+                      bar, *, anchors: list[int] | None = None) -> WarpedFrames:
+    """Render and synthesize the keyframes of a warp ``plan`` (:attr:`RenderPlan.warp`: stride and threshold)
+    into ``out_dir``; ``bar.update(1)`` per keyframe.
 
     With ``anchors`` (consecutive anchors of :func:`simspad.render.warp_schedule.anchor_indices`) only the
     keyframes from the first to the last of them: a chunk of the render, as ``simspad generate`` spreads them
     over workers. Anchors and the noise probe (:func:`render_noise_probe`) found in ``out_dir`` are re-used; the
     noise map is computed from keyframe 0's file and the probe's, so every chunk decides with the same numbers.
     """
-    render_names = frame_names(base_key, times)
-    warp_names = frame_names(warp_key(base_key, stride, threshold), times)
+    times, cam_poses, seed = np.asarray(plan.times_s), np.asarray(plan.camera_to_world), plan.seed
+    stride, threshold = plan.warp["stride"], plan.warp["threshold"]
+    render_names = plan.names  # a plan's names are those of rendered keyframes until the warp results replace them
+    warp_names = frame_names(warp_key(plan.base_key, stride, threshold), times)
     names = list(warp_names)
     camera = PinholeCamera.from_fov(ms.x_fov_deg, ms.width, ms.height)
     object_names = ms.object_names
@@ -200,8 +198,8 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, times: np.ndarray, ca
             key0 = ready[0].rgb
         else:
             key0 = read_exr(out_dir / render_names[0])["rgb"]
-        render_noise_probe(ms, ts, times, cam_poses, base_key, out_dir, seed)
-        noise_y, noise = noise_map(key0, read_exr(out_dir / noise_probe_name(base_key, times))["rgb"])
+        render_noise_probe(ms, ts, plan, out_dir)
+        noise_y, noise = noise_map(key0, read_exr(out_dir / noise_probe_name(plan))["rgb"])
     patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed,
                            lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,

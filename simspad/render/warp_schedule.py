@@ -66,8 +66,8 @@ class Patcher(Protocol):
     def blocks(self, tiles: np.ndarray) -> np.ndarray:
         """The blocks (bool, block grid) that hold ``tiles`` (bool, tile grid of the disagreement)."""
 
-    def tiles(self, blocks: np.ndarray) -> np.ndarray:
-        """The tiles (bool, tile grid) that ``blocks`` cover."""
+    def tiles(self, blocks: np.ndarray, tile_shape: tuple[int, int]) -> np.ndarray:
+        """The tiles (bool, tile grid of ``tile_shape``) that ``blocks`` cover."""
 
     def cost(self, blocks: np.ndarray) -> float:
         """What rendering ``blocks`` costs, as a fraction of a whole render."""
@@ -194,7 +194,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
             blocks = patch.blocks(failing)
             cost = patch.cost(blocks)
             if cost <= PATCH_MAX_FRACTION and (i1 - i0 - 1) * cost <= PATCH_MAX_RENDERS:
-                covered = patch.tiles(blocks)
+                covered = patch.tiles(blocks, failing.shape)
                 for i, (rgb, depth, ids, dis) in frames.items():
                     write(i, patch.apply(i, blocks, rgb), depth, ids)
                     geometries.pop(i, None)

@@ -271,7 +271,10 @@ def test_cli_interpolation_flag(tmp_path, _variant):
 def test_disagreement_is_measured_in_noise_units_per_tile():
     # Two warps differing by two renders' noise alone score about 1; a wrong patch of one tile stands out
     # although it barely moves the frame's RMS.
-    from simspad.render.warp import _tile_noise_ratio
+    from simspad.render.warp import _tile_noise_ratios
+
+    def _tile_noise_ratio(diff, both, sigma):  # the worst tile
+        return _tile_noise_ratios(diff, both, sigma).max()
 
     rng = np.random.default_rng(4)
     sigma = np.full((H, W), 0.05)
@@ -306,8 +309,8 @@ class _TracedBlocks:
     def blocks(self, tiles):
         return self.blocks_mod.blocks_of_tiles(tiles, self.b)
 
-    def tiles(self, blocks):
-        return self.blocks_mod.tiles_of_blocks(blocks, (-(-H // 8), -(-W // 8)), self.b)
+    def tiles(self, blocks, tile_shape):
+        return self.blocks_mod.tiles_of_blocks(blocks, tile_shape, self.b)
 
     def cost(self, blocks):
         return self.blocks_mod.render_fraction(blocks, W, H, self.b, 0, 1024)  # exact pixels: no blur margin
