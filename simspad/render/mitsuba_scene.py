@@ -220,9 +220,7 @@ class MitsubaScene:
     def render_radiance(self, seed: int) -> np.ndarray:
         img = self.mi.render(self.scene, self.params, sensor=self.sensor, seed=seed, spp=self.spp)
         rgb = np.array(img, dtype=np.float32)[..., :3]
-        if PSF_SIGMA_PX > 0:
-            rgb = gaussian_filter(rgb, sigma=(PSF_SIGMA_PX, PSF_SIGMA_PX, 0.0), mode="nearest",
-                                 truncate=PSF_TRUNCATE)
+        rgb = psf_blur(rgb)
         return np.maximum(rgb, 0.0, dtype=np.float32)
 
     def render_radiance_block(self, seed: int, row: int, col: int) -> np.ndarray:
@@ -261,9 +259,7 @@ class MitsubaScene:
         ya, yb = max(y0, 0), min(y0 + side, self.height)
         xa, xb = max(x0, 0), min(x0 + side, self.width)
         rgb = img[ya - y0:yb - y0, xa - x0:xb - x0]
-        if PSF_SIGMA_PX > 0:
-            rgb = gaussian_filter(rgb, sigma=(PSF_SIGMA_PX, PSF_SIGMA_PX, 0.0), mode="nearest",
-                                  truncate=PSF_TRUNCATE)
+        rgb = psf_blur(rgb)
         rows, cols = block_window(row, col, self.width, self.height, block_px)
         inner = rgb[rows.start - ya:rows.stop - ya, cols.start - xa:cols.stop - xa]
         return np.maximum(inner, 0.0, dtype=np.float32)
@@ -299,6 +295,13 @@ class MitsubaScene:
         known = hit & (shape >= 0) & (shape < table.size)
         ids = np.where(known, table[np.clip(shape, 0, table.size - 1)], 0)
         return self._z_from_ray(ray), ids.astype(np.float32)
+
+
+def psf_blur(rgb: np.ndarray) -> np.ndarray:
+    """The reconstruction blur (:data:`PSF_SIGMA_PX`) of an [H, W, 3] image, edge pixels repeated."""
+    if PSF_SIGMA_PX <= 0:
+        return rgb
+    return gaussian_filter(rgb, sigma=(PSF_SIGMA_PX, PSF_SIGMA_PX, 0.0), mode="nearest", truncate=PSF_TRUNCATE)
 
 
 def _matrix(transform) -> np.ndarray:
