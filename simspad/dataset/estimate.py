@@ -38,7 +38,7 @@ from simspad.dataset.directory import recording_rel_path
 from simspad.dataset.executors import (
     default_workers,
     job_environment,
-    render_settings_of,
+    plan_render_task,
 )
 from simspad.dataset.plan import make_plan
 from simspad.io.recording import open_recording
@@ -328,7 +328,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     size_of, n_warp = {}, 0
     for r in plan.renders:
         seq = r.sequence
-        rp = plan_render(seq.scene, seq.trajectory, render_settings_of(r))
+        rp = plan_render_task(r)  # retimed: a render at speed ×k plays its trajectory k times faster
         cost = costs.render[resolve_scene(seq.scene).name]
         w, h = seq.resolution
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)

@@ -111,16 +111,21 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         # Mitsuba loads here, after the job's libLLVM path is set; the variant is per process: set it inside the
         # worker, never inherit it.
         select_variant()
-        seq = task.sequence
         final = Path(out_dir) / task.rel_dir
-        trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
-        plan = plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
+        plan = plan_render_task(task)
         make_out_dir(final)
         existing = [i for i, name in enumerate(plan.names) if (final / name).is_file()]
         return {"ok": True, "plan": plan.to_dict(), "n_keyframes": plan.n_keyframes, "existing": existing,
                 "seconds": time.perf_counter() - t0, "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
+
+
+def plan_render_task(task) -> RenderPlan:
+    """The keyframe plan of a render task: its sequence's trajectory retimed by the task's speed factor."""
+    seq = task.sequence
+    trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
+    return plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
 
 
 #: The scene this worker process loaded last: the next chunk of the same render skips the reload (a keyframe's

@@ -8,7 +8,12 @@ import h5py
 import numpy as np
 import pytest
 
-from simspad.dataset.estimate import disk_needed_bytes
+from simspad.dataset.estimate import (
+    SceneRenderCost,
+    UnitCosts,
+    disk_needed_bytes,
+    estimate_spec,
+)
 from simspad.dataset.executors import ExecutorConfig
 from simspad.dataset.generate import generate
 from simspad.dataset.plan import make_plan
@@ -152,3 +157,11 @@ def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_p
     entries = {e["path"]: e for e in read_manifest(result.out_dir)["recordings"]}
     entry = entries[f"recordings/office/office_x{k:g}_10lx.h5"]
     assert entry["speed_factor"] == k and entry["motion"]["image_speed_px_s_p95"] > 0
+    # The estimate plans each render as generate does, retimed: the spinning fan at ×4 needs more keyframes
+    # (its blades move 4× farther per second), and its count is the one the run rendered.
+    unit = SceneRenderCost(a_s=1.0, b_s=0.0, exr_bytes_per_px=12.0, rss_bytes_per_mp_spp=None, process_rss_bytes=None)
+    est = estimate_spec(spec, UnitCosts(render={"office": unit, "fan": unit}))
+    rendered = {r["path"]: r["n_keyframes"] for r in read_manifest(result.out_dir)["renders"]}
+    planned = [r.rel_dir for r in make_plan(spec, "2025-01-01T00:00:00Z").renders]
+    assert [n for _, n in est.keyframe_s] == [rendered[rel] for rel in planned]
+    assert rendered[planned[3]] > rendered[planned[2]]  # fan ×4 against fan ×1
