@@ -298,6 +298,7 @@ class Estimate:
     cores: int
     plan_s: float
     n_warp_keyframes: int = 0  # keyframes of renders with warp interpolation (costed as if all were rendered)
+    n_shared_keyframes: int = 0  # keyframes a faster render shares with a slower one (linked, not counted)
 
     @property
     def cpu_s(self) -> float:
@@ -325,20 +326,24 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     t0 = time.perf_counter()
     plan = make_plan(spec, "1970-01-01T00:00:00Z")
     keyframe_s, scene_load_s, render_cpu, renders_bytes, largest, render_rss = [], [], 0.0, 0, 0.0, None
-    size_of, n_warp = {}, 0
+    size_of, n_warp, n_shared, planned = {}, 0, 0, {}
     for r in plan.renders:
         seq = r.sequence
-        rp = plan_render_task(r)  # retimed: a render at speed ×k plays its trajectory k times faster
+        # Retimed (a render at speed ×k plays its trajectory k times faster); keyframes shared with the slower
+        # render are linked, not rendered, and take no disk.
+        rp = planned[r.rel_dir] = plan_render_task(r, planned)
+        n = rp.n_keyframes - rp.n_shared
+        n_shared += rp.n_shared
         cost = costs.render[resolve_scene(seq.scene).name]
         w, h = seq.resolution
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
-        keyframe_s.append((per_kf, rp.n_keyframes))
-        scene_load_s.append((cost.load_s, rp.n_keyframes))
+        keyframe_s.append((per_kf, n))
+        scene_load_s.append((cost.load_s, n))
         if rp.warp is not None:
-            n_warp += rp.n_keyframes
-        render_cpu += per_kf * rp.n_keyframes
-        largest = max(largest, per_kf * rp.n_keyframes)
-        renders_bytes += int(cost.exr_bytes_per_px * w * h * rp.n_keyframes)
+            n_warp += n
+        render_cpu += per_kf * n
+        largest = max(largest, per_kf * n)
+        renders_bytes += int(cost.exr_bytes_per_px * w * h * n)
         if cost.rss_bytes_per_mp_spp is not None and cost.process_rss_bytes is not None:
             render_rss = max(render_rss or 0.0,
                              cost.process_rss_bytes + cost.rss_bytes_per_mp_spp * w * h / 1e6 * seq.spp)
@@ -374,7 +379,8 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
                     scene_load_s=scene_load_s,
                     disk_bytes=int(rec_bytes) + renders_bytes, recordings_bytes=int(rec_bytes),
                     renders_bytes=renders_bytes, peak_render_rss_bytes=render_rss, peak_sim_rss_bytes=sim_rss,
-                    cores=default_workers(), plan_s=plan_s, n_warp_keyframes=n_warp)
+                    cores=default_workers(), plan_s=plan_s, n_warp_keyframes=n_warp,
+                    n_shared_keyframes=n_shared)
 
 
 def free_disk_bytes(path) -> int:
@@ -409,6 +415,8 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
              *([f"               {est.n_warp_keyframes} of them in warp renders, costed as if each were "
                 f"rendered: an upper bound (how many a warp render renders depends on where its warps agree)"]
                if est.n_warp_keyframes else []),
+             *([f"               plus {est.n_shared_keyframes} keyframes the faster speeds share with the slower "
+                f"ones (the same poses: linked, not rendered)"] if est.n_shared_keyframes else []),
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",
              f"  total        {est.cpu_s / 3600:.2f} CPU-h",

@@ -40,7 +40,7 @@ from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import RenderPlan
-from simspad.render.renderer import load_scene, plan_render, render_keyframes
+from simspad.render.renderer import link_shared_keyframes, load_scene, plan_render, render_keyframes
 from simspad.render.settings import RenderSettings
 from simspad.render.warp_render import chunk_result, render_noise_probe, render_with_warps
 from simspad.sensors.presets import SpadParams
@@ -121,11 +121,18 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         return _error_result(exc, t0)
 
 
-def plan_render_task(task) -> RenderPlan:
-    """The keyframe plan of a render task: its sequence's trajectory retimed by the task's speed factor."""
+def plan_render_task(task, planned: dict | None = None) -> RenderPlan:
+    """The keyframe plan of a render task: its sequence's trajectory retimed by the task's speed factor, its first
+    keyframes those of its prefix (the next slower speed's render) when it has one (taken from ``planned``, plans
+    by render directory, when it is there)."""
     seq = task.sequence
     trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
-    return plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s)
+    prefix = None
+    if task.prefix is not None:
+        prefix = (planned or {}).get(task.prefix.rel_dir) or plan_render_task(task.prefix, planned)
+    scale = 1.0 if task.prefix is None else task.prefix.speed_factor / task.speed_factor
+    return plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s,
+                       prefix=prefix, prefix_time_scale=scale)
 
 
 #: The scene this worker process loaded last: the next chunk of the same render skips the reload (a keyframe's
@@ -162,7 +169,13 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         _set_render_threads(threads)
         seq = task.sequence
         render_plan = RenderPlan.from_dict(plan)
-        done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=Path(out_dir) / task.rel_dir,
+        final = Path(out_dir) / task.rel_dir
+        n_linked = 0 if task.prefix is None else link_shared_keyframes(render_plan, indices,
+                                                                       Path(out_dir) / task.prefix.rel_dir, final)
+        if n_linked == len(indices):  # nothing left to render: no scene to load
+            return {"ok": True, "n_rendered": 0, "n_reused": n_linked, "seconds": time.perf_counter() - t0,
+                    "cpu_s": time.process_time() - cpu0, "pid": os.getpid(), "host": socket.gethostname()}
+        done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=final,
                                 loaded=_cached_scene(seq, task.speed_factor, render_plan))
         return {"ok": True, "n_rendered": len(done.frame_times_s), "n_reused": done.n_reused,
                 "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),

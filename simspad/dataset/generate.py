@@ -208,6 +208,7 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
     for r in renders:
         queue.add(Job("plan", r, lambda r=r: ex.submit_render_plan(r), label=f"the render plan of {r.sequence.name}"))
     chunked: dict[str, _ChunkedRender] = {}
+    pending_renders = {r.rel_dir for r in renders}  # not finished (or failed) yet in this run
     clean_exit = False
     try:
         while queue.busy:
@@ -222,6 +223,8 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                     if not res.get("ok"):
                         _render_done(manifest, r, res, waiting, queue, ex, outcome, render_times, bar_s, log)
                         manifest.save()
+                        pending_renders.discard(r.rel_dir)
+                        _release_shared(queue, ex, r.rel_dir, chunked, renders)
                         continue
                     state = chunked[r.rel_dir] = _ChunkedRender(res["plan"], seconds=res.get("seconds", 0.0),
                                                                 host=res.get("host"))
@@ -236,11 +239,14 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                             "already there (kept from an interrupted run)")
                     bar_k.total += res["n_keyframes"] - (len(wanted) - len(todo_kf))
                     bar_k.refresh()
-                    chunks = keyframe_chunks(todo_kf, chunk_size_for(len(todo_kf), ex.workers))
-                    state.left = len(chunks)
-                    for c in chunks:
-                        queue.add(Job("chunk", (r, c), lambda r=r, c=c, p=res["plan"]: ex.submit_render_chunk(r, p, c),
-                                      label=f"keyframes {c[0]}–{c[-1]} of {r.sequence.name}"))
+                    n_shared = RenderPlan.from_dict(res["plan"]).n_shared
+                    if (r.prefix is not None and r.prefix.rel_dir in pending_renders
+                            and any(i < n_shared for i in todo_kf)):
+                        # The slower render is still running: its keyframes are linked once it is done.
+                        state.shared = [i for i in todo_kf if i < n_shared]
+                        todo_kf = [i for i in todo_kf if i >= n_shared]
+                        state.left += 1
+                    state.left += _submit_chunks(queue, ex, r, res["plan"], todo_kf)
                     if warp:
                         state.anchors = list(wanted)
                         state.left += 1
@@ -266,6 +272,8 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                     final = _finish_render(out_dir, r, state)
                     _render_done(manifest, r, final, waiting, queue, ex, outcome, render_times, bar_s, log)
                     manifest.save()
+                    pending_renders.discard(r.rel_dir)
+                    _release_shared(queue, ex, r.rel_dir, chunked, renders)
         clean_exit = True
     finally:
         bar_k.close()
@@ -286,6 +294,27 @@ class _ChunkedRender:
     anchors: list = field(default_factory=list)  # a warp render's anchors (empty: linear)
     warp_started: bool = False  # its synthesis chunks are submitted
     warp_chunks: list = field(default_factory=list)  # what they reported (chunk_result)
+    shared: list | None = None  # keyframes to link from the slower render once it is done (None: none waiting)
+
+
+def _submit_chunks(queue, ex, r: RenderTask, plan: dict, indices: list[int]) -> int:
+    """Queue ``indices`` of a planned render in chunks over the workers; returns the number of chunks."""
+    chunks = keyframe_chunks(indices, chunk_size_for(len(indices), ex.workers))
+    for c in chunks:
+        queue.add(Job("chunk", (r, c), lambda r=r, c=c, p=plan: ex.submit_render_chunk(r, p, c),
+                      label=f"keyframes {c[0]}–{c[-1]} of {r.sequence.name}"))
+    return len(chunks)
+
+
+def _release_shared(queue, ex, done_rel_dir: str, chunked: dict, renders) -> None:
+    """The render ``done_rel_dir`` finished (or failed): the faster renders waiting for its keyframes get their
+    shared chunks now (linked where its files are, rendered where they are not)."""
+    for r in renders:
+        state = chunked.get(r.rel_dir)
+        if r.prefix is None or r.prefix.rel_dir != done_rel_dir or state is None or state.shared is None:
+            continue
+        shared, state.shared = state.shared, None
+        state.left += _submit_chunks(queue, ex, r, state.plan, shared) - 1
 
 
 def _submit_warp_chunks(queue, ex, r: RenderTask, state: _ChunkedRender) -> None:

@@ -4,7 +4,8 @@ One render per (sequence, speed) (shared by all lux levels and sensors), one sim
 Every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key ``(sequence, lux)``), every
 render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same whatever the executor, the
 worker count or the order. A speed factor k ≠ 1 (:mod:`simspad.dataset.speed`) appends ``("speed", k)`` to both
-keys and ``_x<k>`` to the names; k = 1 keeps them as a spec without a speed axis has them. Each task carries a
+keys and ``_x<k>`` to the names; k = 1 keeps them as a spec without a speed axis has them. A faster render that
+shares the next slower one's keyframes (:func:`shares_keyframes`) takes that render's seed. Each task carries a
 hash of everything its output depends on (spec content, scene and trajectory bytes, package versions, the speed
 factor, :data:`JOB_SCHEME_VERSION`), which decides on a re-run whether it must be redone.
 """
@@ -39,6 +40,9 @@ class RenderTask:
     rel_dir: str
     seed: int
     speed_factor: float = 1.0  # trajectory played this many times faster (simspad.motion.retiming)
+    #: The same sequence's render at the next slower speed, whose keyframes are this render's first ones (the
+    #: same poses, seed and settings: :func:`shares_keyframes`), or None.
+    prefix: "RenderTask | None" = None
 
 
 @dataclass(frozen=True)
@@ -101,8 +105,12 @@ def make_plan(spec, created_utc: str) -> Plan:
     for seq in spec.sequences:
         seq_hash = sequence_hash(seq, spec)
         scene = scene_name(seq.scene)
+        slower = {}  # speed -> its render, for the faster ones to share
+        for k in sorted(float(v) for v in spec.speed):
+            prev = slower[max(slower)] if slower and shares_keyframes(seq) else None
+            slower[k] = _render_task(spec, seq, k, versions, prev)
         for k in spec.speed:
-            render = _render_task(spec, seq, float(k), versions)
+            render = slower[float(k)]
             renders.append(render)
             for lux in spec.lux:
                 recordings.append(_recording_task(spec, seq, float(k), float(lux), render, seq_hash, scene,
@@ -110,15 +118,27 @@ def make_plan(spec, created_utc: str) -> Plan:
     return Plan(tuple(renders), tuple(recordings))
 
 
-def _render_task(spec, seq, k: float, versions: dict) -> RenderTask:
-    """The render of ``seq`` at speed ``k`` (k = 1: exactly the render of a spec without a speed axis)."""
-    seed = _render_seed(spec.seed, seq.name, k)
+def shares_keyframes(seq) -> bool:
+    """Whether the renders of ``seq`` at several speeds share keyframes: played k times faster from t = 0 the
+    sequence passes through the slower one's poses, in 1/k of the time, so a faster render's first keyframes
+    can be the slower render's files. Only linear renders from t = 0 (a later start plays a different part of
+    the trajectory at each speed; warp renders choose their own keyframes to render)."""
+    return float(seq.start_s) == 0.0 and seq.interpolation == "linear"
+
+
+def _render_task(spec, seq, k: float, versions: dict, prefix: RenderTask | None = None) -> RenderTask:
+    """The render of ``seq`` at speed ``k`` (k = 1: exactly the render of a spec without a speed axis); with
+    ``prefix`` (the next slower speed's render) its first keyframes are the prefix's, so it takes the prefix's
+    seed (the same pixels) and its hash depends on the prefix's."""
+    seed = _render_seed(spec.seed, seq.name, k) if prefix is None else prefix.seed
     key = {"render": sequence_hash(seq), "seed": seed, "versions": versions}
     if k != 1.0:
         key["speed_factor"] = k
+    if prefix is not None:
+        key["prefix"] = prefix.render_hash
     render_hash = spec_hash(key)
     return RenderTask(seq, render_hash, f"{RENDERS_DIR}/{seq.name}{speed_suffix(k)}-{render_hash[:12]}", seed,
-                      speed_factor=k)
+                      speed_factor=k, prefix=prefix)
 
 
 def _recording_task(spec, seq, k: float, lux: float, render: RenderTask, seq_hash: str, scene: str, sensors,

@@ -57,9 +57,10 @@ def frame_key(base: dict, t: float) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def frame_names(base: dict, times: np.ndarray) -> list[str]:
-    """Relative paths of the keyframes at ``times`` (s) inside the render directory."""
-    return [f"frames/{i:06d}-{frame_key(base, t)}.exr" for i, t in enumerate(times)]
+def frame_names(base: dict, times: np.ndarray, first_index: int = 0) -> list[str]:
+    """Relative paths of the keyframes at ``times`` (s) inside the render directory, numbered from
+    ``first_index``."""
+    return [f"frames/{i:06d}-{frame_key(base, t)}.exr" for i, t in enumerate(times, start=first_index)]
 
 
 def write_frame(path: Path, rgb: np.ndarray, depth: np.ndarray, object_id: np.ndarray | None = None) -> None:

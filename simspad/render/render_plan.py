@@ -69,6 +69,12 @@ class RenderPlan:
         schedule = self.timeline.get("schedule", {})
         return schedule.get("warp") if schedule.get("interpolation") == "warp" else None
 
+    @property
+    def n_shared(self) -> int:
+        """How many of the first keyframes are another render's (the same sequence played slower): linked from
+        its directory, not rendered."""
+        return int(self.timeline.get("schedule", {}).get("shared_keyframes", {}).get("n_keyframes", 0))
+
     def keyframes(self) -> list[dict]:
         """The ``keyframes`` list of ``timeline.json``."""
         keyframes = [{"t": float(t), "file": name, "camera_to_world": [list(row) for row in pose],

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -131,11 +133,18 @@ def load_scene(scene, trajectory, width: int, height: int, spp: int, variant: st
 
 
 def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | None = None,
-                spad_bin_s: float | None = None, loaded: LoadedScene | None = None) -> RenderPlan:
+                spad_bin_s: float | None = None, loaded: LoadedScene | None = None,
+                prefix: RenderPlan | None = None, prefix_time_scale: float = 1.0) -> RenderPlan:
     """Stage 1: the keyframe instants, poses and file names of a render, and its ``timeline.json`` fields.
 
     Loads the scene (unless ``loaded`` is given), checks the trajectory covers the span, and runs the adaptive
     schedule. Writes nothing. Arguments as :func:`render_sequence`.
+
+    ``prefix`` (a linearly interpolated plan with the same scene, size, samples and seed) makes this render's first
+    keyframes those of ``prefix``, at its instants times ``prefix_time_scale``, with its poses and file names: the
+    same sequence played faster (:mod:`simspad.motion.retiming`) passes through the same poses, so the files of
+    the slower render serve this one too and need not be rendered again (:func:`link_shared_keyframes`). The
+    schedule goes on from the prefix's last instant to the end of the span.
     """
     width, height = settings.checked_size()
     spp, seed = int(settings.spp), int(settings.seed)
@@ -148,15 +157,26 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     _check_span(ts, loaded.traj_source, t0, t1)
     near_depth_m = near_depth(ts, ms, t0, t1, seed)
     flow_fn = predicted_flow_fn(ts, ms, near_depth_m)
-    times = keyframe_schedule(t0, t1, flow_fn, max_flow_px, min_rate_hz)
+    n_shared = 0
+    if prefix is None:
+        times = keyframe_schedule(t0, t1, flow_fn, max_flow_px, min_rate_hz)
+    else:
+        _check_prefix(prefix, width, height, spp, seed, t0, t1, prefix_time_scale)
+        shared = np.asarray(prefix.times_s, dtype=np.float64) * prefix_time_scale
+        n_shared = len(shared)
+        times = np.concatenate([shared, keyframe_schedule(float(shared[-1]), t1, flow_fn, max_flow_px,
+                                                          min_rate_hz)[1:]])
     step_flow = max_step_flow(flow_fn, times)
-    cam_poses = camera_poses(ts, ms.rest_camera_to_world, times)
+    cam_poses = camera_poses(ts, ms.rest_camera_to_world, times[n_shared:])
     mitsuba_version = ms.mi.__version__
     base_key = {"renderer": RENDERER_VERSION, "mitsuba": mitsuba_version, "variant": loaded.variant,
                 "scene": content_hash(info), "trajectory": loaded.traj_hash, "width": width, "height": height,
                 "spp": spp, "seed": seed, "depth_spp": DEPTH_SPP, "sampler": sampler_for(spp),
                 "psf_sigma_px": PSF_SIGMA_PX}
-    names = frame_names(base_key, times)
+    names = frame_names(base_key, times[n_shared:], first_index=n_shared)
+    if prefix is not None:
+        cam_poses = np.concatenate([np.asarray(prefix.camera_to_world, dtype=np.float64), cam_poses])
+        names = list(prefix.names) + names
     n_spad_bins = None if spad_bin_s is None else brute_force_keyframes(duration_s, spad_bin_s)
     schedule = {"n_keyframes": len(times)}
     if n_spad_bins is not None:
@@ -164,15 +184,19 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     schedule["max_predicted_flow_px"] = step_flow
     # Warp needs object ids to move animated objects, and pays a noise-probe render: below two strides of
     # keyframes it saves nothing, so such short sequences render every keyframe.
-    warp = (settings.interpolation == "warp" and not ms.moves_objects_without_ids
+    warp = (prefix is None and settings.interpolation == "warp" and not ms.moves_objects_without_ids
             and len(times) >= 2 * settings.warp_stride)
     schedule["interpolation"] = "warp" if warp else "linear"
-    schedule["n_rendered_keyframes"] = len(times)
+    schedule["n_rendered_keyframes"] = len(times) - n_shared
+    if n_shared:
+        schedule["shared_keyframes"] = {"n_keyframes": n_shared, "time_scale": float(prefix_time_scale)}
     if warp:
         schedule["warp"] = {"stride": int(settings.warp_stride), "threshold": float(settings.warp_threshold)}
     # What reprojection (keyframe synthesis, measured image motion) needs to move animated objects.
     objects_to_world = tuple({k: m.tolist() for k, m in sorted(object_poses(ts, float(t)).items())}
-                             for t in times) if ms.object_names else ()
+                             for t in times[n_shared:]) if ms.object_names else ()
+    if prefix is not None and objects_to_world:
+        objects_to_world = tuple(prefix.objects_to_world) + objects_to_world
     timeline = dict(
         scene=info.name, scene_hash=base_key["scene"], trajectory=loaded.traj_source,
         trajectory_hash=loaded.traj_hash, start_s=t0, duration_s=float(duration_s),
@@ -190,6 +214,46 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
                       width=width, height=height, spp=spp, seed=seed, variant=loaded.variant,
                       scene_hash=base_key["scene"], trajectory_hash=loaded.traj_hash, timeline=timeline,
                       objects_to_world=objects_to_world, base_key=base_key)
+
+
+def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: int, t0: float, t1: float,
+                  scale: float) -> None:
+    """A prefix must be a linear render with this one's pixels-determining settings, starting where it starts."""
+    why = None
+    if (prefix.width, prefix.height, prefix.spp, prefix.seed) != (width, height, spp, seed):
+        why = "its size, samples per pixel or seed differ"
+    elif prefix.warp is not None or prefix.n_shared:
+        why = "only a linear render that shares nothing itself can be a prefix"
+    elif not (scale > 0 and prefix.times_s[0] * scale == t0 and prefix.times_s[-1] * scale < t1):
+        why = f"its span scaled by {scale:g} is not a prefix of {t0:g}–{t1:g} s"
+    if why is not None:
+        raise SimSpadError(f"cannot share keyframes with that render: {why}", field="prefix")
+
+
+def link_shared_keyframes(plan: RenderPlan, indices, prefix_dir, out_dir) -> int:
+    """Hard-link the shared keyframes (:func:`plan_render`'s ``prefix``) among ``indices`` from the prefix's
+    render directory ``prefix_dir`` into ``out_dir``; a copy where the file system cannot link. Keyframes whose
+    source is missing or damaged are left to :func:`render_keyframes`, which renders the same pixels (same pose,
+    seed and settings). Returns how many were linked or copied."""
+    out_dir, prefix_dir = Path(out_dir), Path(prefix_dir)
+    n = 0
+    for i in indices:
+        if i >= plan.n_shared:
+            continue
+        src, dst = prefix_dir / plan.names[i], out_dir / plan.names[i]
+        if dst.is_file() or not src.is_file() or not frame_is_intact(src):
+            continue
+        make_out_dir(dst.parent)
+        try:
+            os.link(src, dst)
+        except FileExistsError:
+            continue
+        except OSError:  # no hard links here (another file system, or not supported): an atomic copy
+            tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+            shutil.copyfile(src, tmp)
+            os.replace(tmp, dst)
+        n += 1
+    return n
 
 
 def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, progress: bool = False,
@@ -237,7 +301,10 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     counter = loaded.counter if loaded is not None else None
     if counter is not None:
         counter.take()  # kernels of loading and depth probes belong to no frame
-    frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), paths[i], i in todo) for i in indices]
+    # Objects are posed as the plan says (shared keyframes were planned on the slower trajectory).
+    frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), paths[i], i in todo,
+               {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world else None)
+              for i in indices]
     return _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
 
 
@@ -373,12 +440,12 @@ def _render_frames(loaded: LoadedScene | None, frames: list, seed: int, counter:
     bar = _progress(len(frames), progress)
     t_render = time.perf_counter()
     try:
-        for i, t, camera_to_world, path, needed in frames:
+        for i, t, camera_to_world, path, needed, objects in frames:
             if not needed:
                 n_reused += 1
             else:
                 tic = time.perf_counter()
-                loaded.ms.set_pose(camera_to_world, object_poses(loaded.ts, t))
+                loaded.ms.set_pose(camera_to_world, object_poses(loaded.ts, t) if objects is None else objects)
                 rgb = loaded.ms.render_radiance(seed)
                 depth, object_id = loaded.ms.render_depth_ids(seed)
                 write_frame(path, rgb, depth, object_id)

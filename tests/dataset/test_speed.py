@@ -4,6 +4,9 @@ and whose measured image motion is stated in its attributes."""
 
 from __future__ import annotations
 
+import json
+import shutil
+
 import h5py
 import numpy as np
 import pytest
@@ -27,8 +30,9 @@ from simspad.sensors.spad.model import n_bins
 MOTION_ATTRS = ("speed_factor", "image_speed_px_s_p50", "image_speed_px_s_p95", "frame_blur_px_p95")
 
 
-def _spec(tmp_path, speed_line: str, *, duration_s=0.05, resolution=(80, 60), sensors="") -> object:
-    path = tmp_path / "spec.toml"
+def _spec(tmp_path, speed_line: str, *, duration_s=0.05, resolution=(80, 60), sensors="", start_s=0.0,
+          name="spec.toml") -> object:
+    path = tmp_path / name
     path.write_text(f"""
 name = "s"
 seed = 3
@@ -39,12 +43,14 @@ lux = [10, 100]
 [[sequences]]
 scene = "office"
 duration_s = {duration_s}
+start_s = {start_s}
 resolution = [{resolution[0]}, {resolution[1]}]
 spp = 1
 
 [[sequences]]
 scene = "fan"
 duration_s = {duration_s}
+start_s = {start_s}
 resolution = [{resolution[0]}, {resolution[1]}]
 spp = 1
 {sensors}
@@ -96,7 +102,13 @@ def test_each_speed_gets_its_own_render_names_and_seeds(tmp_path):
     fast_render = next(r for r in both.renders if r.rel_dir == fast[0].render_rel_dir)
     base_render = both.renders[0]
     assert fast_render.rel_dir.startswith("renders/office_x8-")
-    assert fast_render.seed != base_render.seed and fast_render.render_hash != base_render.render_hash
+    # ×8 from t = 0 passes through ×1's poses: it shares ×1's keyframes, so it takes ×1's seed (same pixels)
+    assert fast_render.prefix == base_render and fast_render.seed == base_render.seed
+    assert fast_render.render_hash != base_render.render_hash
+    # from a later start the speeds play different parts of the trajectory: nothing shared, seeds of their own
+    late = make_plan(load_spec(_spec(tmp_path, "speed = [1, 8]", start_s=0.01, name="late.toml")),
+                     "2025-01-01T00:00:00Z").renders
+    assert late[1].speed_factor == 8.0 and late[1].prefix is None and late[1].seed != late[0].seed
     assert len({r.recording_hash for r in both.recordings}) == 8
 
 
@@ -157,11 +169,45 @@ def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_p
     entries = {e["path"]: e for e in read_manifest(result.out_dir)["recordings"]}
     entry = entries[f"recordings/office/office_x{k:g}_10lx.h5"]
     assert entry["speed_factor"] == k and entry["motion"]["image_speed_px_s_p95"] > 0
-    # The estimate plans each render as generate does, retimed: the spinning fan at ×4 needs more keyframes
-    # (its blades move 4× farther per second), and its count is the one the run rendered.
+
+    # ×4 passes through ×1's poses in a quarter of the time: its first keyframes are ×1's files, hard-linked.
+    out = result.out_dir
+    renders = make_plan(spec, "2025-01-01T00:00:00Z").renders
+    timelines = {r.rel_dir: json.loads((out / r.rel_dir / "timeline.json").read_text()) for r in renders}
+    fast_frames = {}
+    for slow, fast in ((renders[0], renders[1]), (renders[2], renders[3])):
+        assert fast.prefix == slow
+        s_kf, f_kf = timelines[slow.rel_dir]["keyframes"], timelines[fast.rel_dir]["keyframes"]
+        shared = timelines[fast.rel_dir]["schedule"]["shared_keyframes"]
+        assert shared == {"n_keyframes": len(s_kf), "time_scale": 0.25} and len(f_kf) > len(s_kf)
+        for a, b in zip(s_kf, f_kf):
+            assert b["t"] == a["t"] / 4 and b["camera_to_world"] == a["camera_to_world"] and b["file"] == a["file"]
+            assert (out / fast.rel_dir / b["file"]).samefile(out / slow.rel_dir / a["file"])
+        if fast.sequence.scene == "office":  # every pose, shared or not, is the retimed trajectory's at its t
+            np.testing.assert_allclose([kf["camera_to_world"] for kf in f_kf],
+                                       base.camera.pose(k * np.array([kf["t"] for kf in f_kf])), rtol=0, atol=1e-9)
+        fast_frames[fast.rel_dir] = {kf["file"]: (out / fast.rel_dir / kf["file"]).read_bytes() for kf in f_kf}
+
+    # The estimate plans each render as generate does: retimed (the spinning fan at ×4 needs more keyframes, its
+    # blades move 4× farther per second), counting only what is rendered, not what is shared.
     unit = SceneRenderCost(a_s=1.0, b_s=0.0, exr_bytes_per_px=12.0, rss_bytes_per_mp_spp=None, process_rss_bytes=None)
     est = estimate_spec(spec, UnitCosts(render={"office": unit, "fan": unit}))
-    rendered = {r["path"]: r["n_keyframes"] for r in read_manifest(result.out_dir)["renders"]}
-    planned = [r.rel_dir for r in make_plan(spec, "2025-01-01T00:00:00Z").renders]
-    assert [n for _, n in est.keyframe_s] == [rendered[rel] for rel in planned]
-    assert rendered[planned[3]] > rendered[planned[2]]  # fan ×4 against fan ×1
+    rendered = {r["path"]: r["n_keyframes"] for r in read_manifest(out)["renders"]}
+    shared = {r.rel_dir: len(timelines[r.prefix.rel_dir]["keyframes"]) if r.prefix else 0 for r in renders}
+    assert [n for _, n in est.keyframe_s] == [rendered[r.rel_dir] - shared[r.rel_dir] for r in renders]
+    assert est.n_shared_keyframes == sum(shared.values()) > 0
+    assert rendered[renders[3].rel_dir] > 2 * rendered[renders[2].rel_dir]  # fan ×4 against fan ×1
+
+    # Without the slower render's files (deleted; its recordings stay complete, so it is not rendered again) the
+    # faster render renders its shared keyframes itself, on 2 workers: the same bytes as the linked files.
+    for r in renders:
+        shutil.rmtree(out / r.rel_dir)
+    for rec in make_plan(spec, "2025-01-01T00:00:00Z").recordings:
+        if rec.speed_factor == k:
+            (out / rec.rel_path).unlink()
+    generate(spec, out, ExecutorConfig(workers=2), progress=False, created_utc="2025-01-01T00:00:00Z")
+    for r in renders:
+        assert (out / r.rel_dir).exists() == (r.speed_factor == k)
+    for rel, frames in fast_frames.items():
+        for name, data in frames.items():
+            assert (out / rel / name).read_bytes() == data
