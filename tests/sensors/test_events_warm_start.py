@@ -38,15 +38,19 @@ print(json.dumps(stats))
 """
 
 
-def test_a_second_process_compiles_nothing():
-    """This process runs the simulation first (compiling and caching whatever this checkout has not cached yet); a
-    fresh process then finds every signature it dispatches in the cache: numba's own start-up is all it pays."""
-    exec(_SIMULATE, {})
+def _simulate_in_fresh_process() -> dict:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(simspad.__file__).resolve().parents[1]),
                                                          os.environ.get("PYTHONPATH", "")])}
     done = subprocess.run([sys.executable, "-c", _SIMULATE], capture_output=True, text=True, env=env, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
-    stats = json.loads(done.stdout.strip().splitlines()[-1])
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_a_second_process_compiles_nothing():
+    """The first process compiles and caches whatever this checkout has not cached yet; the second finds every
+    signature it dispatches in the cache: numba's own start-up is all it pays."""
+    _simulate_in_fresh_process()
+    stats = _simulate_in_fresh_process()
     assert {"simspad.sensors.events.kernel.init_state", "simspad.sensors.events.kernel.simulate_blocks",
             "simspad.sensors.events.sort.merge_front"} <= stats.keys()
     compiled = {name: hits_misses for name, hits_misses in stats.items() if hits_misses[1] > 0}
