@@ -284,8 +284,23 @@ def run_pixels(p0, p1, start, limit, knots, maps, model, state, buf):
                 # detector D(x) = lp(x) − ref + ρ·(s − t_ref) = A + B·x + c·exp(−x/τ)
                 c = lp - l_t + k * tau
                 b_slope = k + rho
+                # Fast path for the common quiet step (not blind, no crossing, no noise event): D(x) = lin(x) +
+                # c·exp(−x/τ) with lin linear, so D ≤ max(lin(0) + max(c, c·decay), lin(h) + c·decay) and
+                # D ≥ min(lin(0) + min(c, c·decay), lin(h) + c·decay) on [0, h] (exact extremes of a convex or
+                # concave D; min/max instead of branches on the signs of c and B, which are data-dependent
+                # and mispredicted). Where these bounds are inconclusive the exact path below decides.
+                quiet = False
+                if t >= t_avail:
+                    a_off = l_t - k * tau - ref + rho * (t - t_ref)
+                    trh = c * decay
+                    d_end = a_off + b_slope * h + trh
+                    quiet = (max(a_off + max(c, trh), d_end) < theta_on and min(a_off + min(c, trh), d_end) > -theta_off
+                             and r_shot * h < hz_shot and r_hot * h < hz_hot)
+                    if quiet:
+                        hz_shot -= r_shot * h
+                        hz_hot -= r_hot * h
                 cur = t
-                while True:
+                while not quiet:
                     if cur < t_avail:
                         s_end = min(t_avail, s_b)
                         dt = s_end - cur

@@ -40,6 +40,7 @@ import numpy as np
 
 from simspad.errors import SimSpadError
 from simspad.physics.photoreceptor import photocurrent_e_s, reference_current_1lux
+from simspad.physics.radiometry import detection_area_m2
 from simspad.sensors.presets import EventParams
 
 LABEL_SIGNAL, LABEL_SHOT, LABEL_LEAK, LABEL_HOT = 0, 1, 2, 3
@@ -100,11 +101,18 @@ def validate_params(params: EventParams) -> None:
             raise SimSpadError(f"{message}, got {getattr(params, name)!r}", field=f"{_FIELD}.{name}")
 
 
-def sensor_photocurrent_e_s(flux_ph_s_m2, params: EventParams) -> np.ndarray:
+def sensor_photocurrent_e_s(flux_ph_s_m2, params: EventParams, out: np.ndarray | None = None) -> np.ndarray:
     """Photocurrent of this sensor's pixels, e⁻ s⁻¹ (float64), for photon irradiance ``flux_ph_s_m2``
-    (photons s⁻¹ m⁻²): :func:`simspad.physics.photoreceptor.photocurrent_e_s` with the sensor's pixel."""
-    return photocurrent_e_s(flux_ph_s_m2, params.pixel_pitch_m, params.fill_factor, params.qe,
-                            params.dark_current_e_s)
+    (photons s⁻¹ m⁻²): :func:`simspad.physics.photoreceptor.photocurrent_e_s` with the sensor's pixel.
+
+    ``out``: a float64 array of the flux's size to write into (no temporaries; the same values)."""
+    if out is None:
+        return photocurrent_e_s(flux_ph_s_m2, params.pixel_pitch_m, params.fill_factor, params.qe,
+                                params.dark_current_e_s)
+    area = detection_area_m2(params.pixel_pitch_m, params.fill_factor, params.qe)
+    np.multiply(np.asarray(flux_ph_s_m2).reshape(out.shape), area, out=out, dtype=np.float64)
+    out += params.dark_current_e_s
+    return out
 
 
 def sensor_current_1lux_e_s(mean_flux_ph_s_m2: float, lux: float, params: EventParams) -> float:

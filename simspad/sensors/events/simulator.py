@@ -171,21 +171,27 @@ class EventSimulator:
 
 def iter_knot_chunks(flux_tl, t0: float, t1: float, params: EventParams, max_bytes: int = CHUNK_BYTES,
                      max_pieces: int = CHUNK_PIECES):
-    """Yield ``(knot_t [m+1], photocurrent [m+1, H·W])`` covering [t0, t1] in chunks of whole keyframe pieces."""
+    """Yield ``(knot_t [m+1], photocurrent [m+1, H·W])`` covering [t0, t1] in chunks of whole keyframe pieces.
+
+    Each chunk is a fresh array (a consumer may keep it), filled knot by knot in place; the last knot of a chunk
+    is the first of the next."""
     n_pix = flux_tl.width * flux_tl.height
     per_chunk = max(1, min(max_pieces, max_bytes // (8 * n_pix) - 1))
-    times, values = [], []
+    times, values = [], None
     for ta, tb, ya, yb in flux_tl.segments(t0, t1):
         if not times:
             times.append(ta)
-            values.append(sensor_photocurrent_e_s(ya, params).ravel())
+            values = np.empty((per_chunk + 1, n_pix))
+            sensor_photocurrent_e_s(ya, params, out=values[0])
         times.append(tb)
-        values.append(sensor_photocurrent_e_s(yb, params).ravel())
+        sensor_photocurrent_e_s(yb, params, out=values[len(times) - 1])
         if len(times) > per_chunk:
-            yield np.array(times), np.stack(values)
-            times, values = times[-1:], values[-1:]
+            yield np.array(times), values
+            last = values[-1]
+            times, values = times[-1:], np.empty((per_chunk + 1, n_pix))
+            values[0] = last
     if len(times) > 1:
-        yield np.array(times), np.stack(values)
+        yield np.array(times), values[:len(times)]
 
 
 class _EventsWriter:
