@@ -226,6 +226,38 @@ def test_time_varying_ramp_integrates_exactly(peak_lambda, shape):
     assert _chi2_ok(per_bin, mid, npx)[0] > 3 * bound
 
 
+def test_tabulated_sparse_rows_follow_ramps_inside_long_runs():
+    """Keyframes 1.7 ms apart (≈ 166 bins per run): Λ ramps 0.02 → 0.07 → 0.025, every byte sparse (8·0.07 below
+    ``DENSE_MIN_CANDIDATES``) and every row tabulated (its candidates outnumber its runs × pixels), so thinning
+    takes the exact Λ_k from the per-row table of each run's a + b·dk. Per-bin counts follow Binomial(N, p_k)
+    (χ²); taking Λ constant over each call (the table's b ignored) is rejected by the same bound."""
+    from simspad.sensors.spad.kernel import _TABLE_MIN_RUN_BINS, DENSE_MIN_CANDIDATES
+
+    shape, n, chunk = (96, 64), 2500, 500
+    p = SpadParams(gate_s=BIN_S, **QUIET)
+    q = p.detection_area_m2
+    knots_t = np.array([0.0, 1.7e-3, 3.4e-3, 5.1e-3, 6.8e-3, 8.5e-3, 10.2e-3, 30e-3])
+    knots_lam = np.array([0.02, 0.07, 0.025, 0.06, 0.02, 0.07, 0.03, 0.03])
+    assert 8 * knots_lam.max() < DENSE_MIN_CANDIDATES  # sparse everywhere
+    runs_per_call = 2 * (chunk * BIN_S / 1.7e-3 + 1)  # a run per piece and one per straddling gate
+    assert runs_per_call * _TABLE_MIN_RUN_BINS <= chunk  # the call's runs are long enough to tabulate
+    # each row's candidates (at least 8·Λ_min per byte and bin) outnumber its table's entries
+    assert chunk * 8 * knots_lam.min() * (shape[1] // 8) >= runs_per_call * shape[1]
+    frames = np.broadcast_to((knots_lam / (q * BIN_S))[:, None, None], (knots_t.size, *shape)).astype(np.float32)
+    tl = Timeline.from_arrays(knots_t, frames)
+    knots_y32 = frames[:, 0, 0].astype(np.float64)
+    chunker = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(17))
+    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(chunk, n - k0)), shape[1]).sum(axis=(1, 2))
+                              for k0 in range(0, n, chunk)])
+    starts = np.arange(n) * BIN_S
+    lam = np.array([q * _gate_integral(knots_t, knots_y32, s, s + BIN_S) for s in starts])
+    npx = shape[0] * shape[1]
+    stat, dof, bound = _chi2_ok(per_bin, -np.expm1(-lam), npx)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    per_call = np.repeat(lam.reshape(-1, chunk).mean(axis=1), chunk)
+    assert _chi2_ok(per_bin, -np.expm1(-per_call), npx)[0] > 3 * bound
+
+
 def test_dark_frames_reproduce_dcr_map():
     """No light: per-pixel counts over 2·10⁵ bins follow the DCR map; hot pixels are found at their rate."""
     p = SpadParams(gate_s=BIN_S, **QUIET)

@@ -11,7 +11,9 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
 - *sparse*: the byte's 8 pixels × m bins form one sequence of candidate slots; geometric skips between
   candidates at the byte's largest rate Λ_max (``⌊E/Λ_max⌋``, one ziggurat exponential per candidate,
   :mod:`simspad.physics.ziggurat`) and thinning by ``p_k/p_max`` (a pixel-wise rejection on the upper bound Λ
-  and a squeeze on the lower bound before the exact ``p_k``). Work is proportional to detections, plus one
+  and a squeeze on the lower bound before the exact ``p_k``; in rows with many candidates and calls whose runs
+  are long, the exact Λ_k comes from a per-row table of each run's ``a + b·dk`` instead of the keyframes,
+  :data:`_TABLE_MIN_RUN_BINS`). Work is proportional to detections, plus one
   terminating draw per byte: dark scenes cost almost nothing. A byte whose pixels differ so much (a hot pixel
   among dark ones) that the joint candidates would outnumber per-pixel draws is skipped pixel by pixel, so a hot
   pixel does not make its byte dense;
@@ -54,6 +56,12 @@ DENSE_MIN_CANDIDATES = 0.6
 #: the dense loop costs per bin of the row whatever its number of bytes, and a sparse sampler per candidate.
 DENSE_MIN_BYTES = 16
 _TWO16 = 65536.0
+#: Mean bins per run from which the sparse sampler may tabulate each run's Λ per row: Λ_k = a + b·(k − k_r),
+#: one multiply-add from a row-local table instead of a weighted sum of keyframes read from the ring. A row is
+#: tabulated when its expected sparse candidates outnumber its run × pixel entries. Kernel alone at mean
+#: P(1) = 0.05 on the scene of benchmarks/bench_spad.py: 179 → 175 ms per 512 bins (min of 10, interleaved);
+#: unchanged at 0.001 and 0.01, where rows are not tabulated.
+_TABLE_MIN_RUN_BINS = 8
 #: Bytes of the sampling buffer (all bins of a block of rows), well inside L2.
 _BLOCK_BYTES = 512 << 10
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], np.int64)
@@ -244,6 +252,12 @@ def spad_chunk(out, events, layout, response, seed):
     lam_row = np.empty(W, np.float64)
     slope_row = np.empty(W, np.float64)
     bin_run = layout.bin_run
+    # the sparse sampler's exact Λ (thinning) from a per-row table of each run's a + b·dk, when the call has few
+    # runs (keyframes far apart); with a run every few bins the table would cost more than it saves
+    n_runs = len(layout.run_k0)
+    tabulated = n_runs * _TABLE_MIN_RUN_BINS <= m
+    run_a = np.empty((n_runs if tabulated else 0, W), np.float64)
+    run_b = np.empty((n_runs if tabulated else 0, W), np.float64)
     # dense bytes: z·2¹⁶ and its per-bin factor for bit b of the row's i-th dense byte, the byte of each bin
     t16 = np.empty((8, Wb), np.float64)
     f16 = np.empty((8, Wb), np.float64)
@@ -285,6 +299,26 @@ def spad_chunk(out, events, layout, response, seed):
             if byte_candidates[xb] >= dense_min:
                 n_qualify += 1
         row_dense_min = dense_min if n_qualify >= min(dense_min_bytes, Wb) else math.inf
+        # the table costs a few operations per run and pixel: worth it when the row's sparse candidates (about
+        # as many exact Λ) outnumber them
+        row_candidates = 0.0
+        for xb in range(Wb):
+            if byte_candidates[xb] < row_dense_min:
+                row_candidates += byte_candidates[xb]
+        row_tabulated = tabulated and m * row_candidates >= n_runs * W
+        if row_tabulated:  # Λ = a + b·dk of each run, all pixels at once (vectorised)
+            for r in range(n_runs):
+                for x in range(W):
+                    run_a[r, x] = float(dcr[y, x]) * gate_s
+                    run_b[r, x] = 0.0
+                for term in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
+                    c = layout.term_c[term]
+                    dc = layout.term_dc[term]
+                    img = layout.term_img[term]
+                    for x in range(W):
+                        v = float(images[img, y, x])
+                        run_a[r, x] += c * v
+                        run_b[r, x] += dc * v
         for xb in range(Wb):
             # the dense sampler costs the same whatever the rates
             if byte_candidates[xb] >= row_dense_min:
@@ -338,7 +372,11 @@ def spad_chunk(out, events, layout, response, seed):
                         continue
                     x = 8 * xb + bit
                     if up >= lo_bound[bit]:
-                        lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
+                        if row_tabulated:
+                            r = bin_run[k]
+                            lam = max(run_a[r, x] + float(k - layout.run_k0[r]) * run_b[r, x], 0.0)
+                        else:
+                            lam = _lam(layout, k, y, x, float(dcr[y, x]) * gate_s)
                         # p_k = 1 − e^(−Λ) lies in [Λ − Λ²/2, Λ]: the exponential only inside that band
                         if up >= lam or (up >= lam * (1.0 - 0.5 * lam) and up >= -math.expm1(-lam)):
                             continue
