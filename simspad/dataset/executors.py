@@ -172,12 +172,12 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         final = Path(out_dir) / task.rel_dir
         n_linked = 0 if task.prefix is None else link_shared_keyframes(render_plan, indices,
                                                                        Path(out_dir) / task.prefix.rel_dir, final)
-        if n_linked == len(indices):  # nothing left to render: no scene to load
-            return {"ok": True, "n_rendered": 0, "n_reused": n_linked, "seconds": time.perf_counter() - t0,
-                    "cpu_s": time.process_time() - cpu0, "pid": os.getpid(), "host": socket.gethostname()}
-        done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=final,
-                                loaded=_cached_scene(seq, task.speed_factor, render_plan))
-        return {"ok": True, "n_rendered": len(done.frame_times_s), "n_reused": done.n_reused,
+        n_rendered, n_reused = 0, n_linked
+        if n_linked < len(indices):  # else nothing left to render: no scene to load
+            done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=final,
+                                    loaded=_cached_scene(seq, task.speed_factor, render_plan))
+            n_rendered, n_reused = len(done.frame_times_s), done.n_reused
+        return {"ok": True, "n_rendered": n_rendered, "n_reused": n_reused,
                 "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),
                 "host": socket.gethostname()}
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed

@@ -229,7 +229,8 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                     state = chunked[r.rel_dir] = _ChunkedRender(res["plan"], seconds=res.get("seconds", 0.0),
                                                                 host=res.get("host"))
                     existing = set(res.get("existing", ()))
-                    warp = RenderPlan.from_dict(res["plan"]).warp
+                    planned = RenderPlan.from_dict(res["plan"])
+                    warp, n_shared = planned.warp, planned.n_shared
                     # A warp render renders its anchors (and a noise probe) first, then synthesizes between them.
                     wanted = (anchor_indices(res["n_keyframes"], warp["stride"]) if warp
                               else range(res["n_keyframes"]))
@@ -239,7 +240,6 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                             "already there (kept from an interrupted run)")
                     bar_k.total += res["n_keyframes"] - (len(wanted) - len(todo_kf))
                     bar_k.refresh()
-                    n_shared = RenderPlan.from_dict(res["plan"]).n_shared
                     if (r.prefix is not None and r.prefix.rel_dir in pending_renders
                             and any(i < n_shared for i in todo_kf)):
                         # The slower render is still running: its keyframes are linked once it is done.

@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from simspad.physics.radiometry import detection_rate
+from simspad.physics.radiometry import detection_area_m2, detection_rate
 
 #: Smallest photocurrent the models take, e⁻ s⁻¹: keeps ln I finite if a user sets the dark current to 0.
 MIN_CURRENT_E_S = 1e-6
@@ -37,7 +37,7 @@ _TWO_PI = 2.0 * math.pi
 
 
 def photocurrent_e_s(flux_ph_s_m2, pixel_pitch_m: float, fill_factor: float, qe: float,
-                     dark_current_e_s: float) -> np.ndarray:
+                     dark_current_e_s: float, out: np.ndarray | None = None) -> np.ndarray:
     """Photo-electron rate plus dark current.
 
     Parameters
@@ -50,14 +50,22 @@ def photocurrent_e_s(flux_ph_s_m2, pixel_pitch_m: float, fill_factor: float, qe:
         Sensitive fraction of the pixel and its quantum efficiency.
     dark_current_e_s : float
         Dark current, e⁻ s⁻¹.
+    out : ndarray float64, optional
+        Written in place instead of allocating (the flux reshaped to its shape; the same values): streaming
+        callers fill chunk buffers without temporaries.
 
     Returns
     -------
     ndarray float64
-        Photocurrent ``I``, e⁻ s⁻¹.
+        Photocurrent ``I``, e⁻ s⁻¹ (``out`` when given).
     """
-    signal = detection_rate(np.asarray(flux_ph_s_m2, dtype=np.float64), pixel_pitch_m, fill_factor, qe)
-    return signal + dark_current_e_s
+    if out is None:
+        signal = detection_rate(np.asarray(flux_ph_s_m2, dtype=np.float64), pixel_pitch_m, fill_factor, qe)
+        return signal + dark_current_e_s
+    np.multiply(np.asarray(flux_ph_s_m2).reshape(out.shape), detection_area_m2(pixel_pitch_m, fill_factor, qe),
+                out=out, dtype=np.float64)
+    out += dark_current_e_s
+    return out
 
 
 def cutoff_hz(photocurrent, cutoff_hz_max: float, cutoff_ref_rate_e_s: float) -> np.ndarray:

@@ -157,26 +157,30 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     _check_span(ts, loaded.traj_source, t0, t1)
     near_depth_m = near_depth(ts, ms, t0, t1, seed)
     flow_fn = predicted_flow_fn(ts, ms, near_depth_m)
-    n_shared = 0
-    if prefix is None:
-        times = keyframe_schedule(t0, t1, flow_fn, max_flow_px, min_rate_hz)
-    else:
+    shared = ()  # instants of the prefix's keyframes, in this render's time
+    if prefix is not None:
         _check_prefix(prefix, width, height, spp, seed, t0, t1, prefix_time_scale)
         shared = np.asarray(prefix.times_s, dtype=np.float64) * prefix_time_scale
-        n_shared = len(shared)
-        times = np.concatenate([shared, keyframe_schedule(float(shared[-1]), t1, flow_fn, max_flow_px,
-                                                          min_rate_hz)[1:]])
+    n_shared = len(shared)
+    own = keyframe_schedule(shared[-1] if n_shared else t0, t1, flow_fn, max_flow_px, min_rate_hz)[
+        1 if n_shared else 0:]
+    times = np.concatenate([shared, own])
     step_flow = max_step_flow(flow_fn, times)
-    cam_poses = camera_poses(ts, ms.rest_camera_to_world, times[n_shared:])
     mitsuba_version = ms.mi.__version__
     base_key = {"renderer": RENDERER_VERSION, "mitsuba": mitsuba_version, "variant": loaded.variant,
                 "scene": content_hash(info), "trajectory": loaded.traj_hash, "width": width, "height": height,
                 "spp": spp, "seed": seed, "depth_spp": DEPTH_SPP, "sampler": sampler_for(spp),
                 "psf_sigma_px": PSF_SIGMA_PX}
-    names = frame_names(base_key, times[n_shared:], first_index=n_shared)
+    # Poses and files of this render's own keyframes; the shared ones are the prefix's, as it rendered them.
+    cam_poses = [tuple(tuple(row) for row in p.tolist()) for p in camera_poses(ts, ms.rest_camera_to_world, own)]
+    names = frame_names(base_key, own, first_index=n_shared)
+    # What reprojection (keyframe synthesis, measured image motion) needs to move animated objects.
+    objects_to_world = [{k: m.tolist() for k, m in sorted(object_poses(ts, float(t)).items())}
+                        for t in own] if ms.object_names else []
     if prefix is not None:
-        cam_poses = np.concatenate([np.asarray(prefix.camera_to_world, dtype=np.float64), cam_poses])
+        cam_poses = list(prefix.camera_to_world) + cam_poses
         names = list(prefix.names) + names
+        objects_to_world = list(prefix.objects_to_world) + objects_to_world if objects_to_world else []
     n_spad_bins = None if spad_bin_s is None else brute_force_keyframes(duration_s, spad_bin_s)
     schedule = {"n_keyframes": len(times)}
     if n_spad_bins is not None:
@@ -187,16 +191,11 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     warp = (prefix is None and settings.interpolation == "warp" and not ms.moves_objects_without_ids
             and len(times) >= 2 * settings.warp_stride)
     schedule["interpolation"] = "warp" if warp else "linear"
-    schedule["n_rendered_keyframes"] = len(times) - n_shared
+    schedule["n_rendered_keyframes"] = len(own)
     if n_shared:
         schedule["shared_keyframes"] = {"n_keyframes": n_shared, "time_scale": float(prefix_time_scale)}
     if warp:
         schedule["warp"] = {"stride": int(settings.warp_stride), "threshold": float(settings.warp_threshold)}
-    # What reprojection (keyframe synthesis, measured image motion) needs to move animated objects.
-    objects_to_world = tuple({k: m.tolist() for k, m in sorted(object_poses(ts, float(t)).items())}
-                             for t in times[n_shared:]) if ms.object_names else ()
-    if prefix is not None and objects_to_world:
-        objects_to_world = tuple(prefix.objects_to_world) + objects_to_world
     timeline = dict(
         scene=info.name, scene_hash=base_key["scene"], trajectory=loaded.traj_source,
         trajectory_hash=loaded.traj_hash, start_s=t0, duration_s=float(duration_s),
@@ -209,11 +208,10 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
                   "animated_objects": ms.object_names, "simspad_renderer_version": RENDERER_VERSION},
         schedule=schedule,
     )
-    return RenderPlan(times_s=tuple(float(t) for t in times), names=tuple(names),
-                      camera_to_world=tuple(tuple(tuple(row) for row in p.tolist()) for p in cam_poses),
+    return RenderPlan(times_s=tuple(float(t) for t in times), names=tuple(names), camera_to_world=tuple(cam_poses),
                       width=width, height=height, spp=spp, seed=seed, variant=loaded.variant,
                       scene_hash=base_key["scene"], trajectory_hash=loaded.traj_hash, timeline=timeline,
-                      objects_to_world=objects_to_world, base_key=base_key)
+                      objects_to_world=tuple(objects_to_world), base_key=base_key)
 
 
 def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: int, t0: float, t1: float,

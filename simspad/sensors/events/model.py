@@ -40,7 +40,6 @@ import numpy as np
 
 from simspad.errors import SimSpadError
 from simspad.physics.photoreceptor import photocurrent_e_s, reference_current_1lux
-from simspad.physics.radiometry import detection_area_m2
 from simspad.sensors.presets import EventParams
 
 LABEL_SIGNAL, LABEL_SHOT, LABEL_LEAK, LABEL_HOT = 0, 1, 2, 3
@@ -106,13 +105,8 @@ def sensor_photocurrent_e_s(flux_ph_s_m2, params: EventParams, out: np.ndarray |
     (photons s⁻¹ m⁻²): :func:`simspad.physics.photoreceptor.photocurrent_e_s` with the sensor's pixel.
 
     ``out``: a float64 array of the flux's size to write into (no temporaries; the same values)."""
-    if out is None:
-        return photocurrent_e_s(flux_ph_s_m2, params.pixel_pitch_m, params.fill_factor, params.qe,
-                                params.dark_current_e_s)
-    area = detection_area_m2(params.pixel_pitch_m, params.fill_factor, params.qe)
-    np.multiply(np.asarray(flux_ph_s_m2).reshape(out.shape), area, out=out, dtype=np.float64)
-    out += params.dark_current_e_s
-    return out
+    return photocurrent_e_s(flux_ph_s_m2, params.pixel_pitch_m, params.fill_factor, params.qe,
+                            params.dark_current_e_s, out=out)
 
 
 def sensor_current_1lux_e_s(mean_flux_ph_s_m2: float, lux: float, params: EventParams) -> float:
