@@ -220,8 +220,8 @@ def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: i
     why = None
     if (prefix.width, prefix.height, prefix.spp, prefix.seed) != (width, height, spp, seed):
         why = "its size, samples per pixel or seed differ"
-    elif prefix.warp is not None or prefix.n_shared:
-        why = "only a linear render that shares nothing itself can be a prefix"
+    elif prefix.warp is not None:  # (a prefix sharing its own first keyframes is fine: its files are all there)
+        why = "only a linear render can be a prefix"
     elif not (scale > 0 and prefix.times_s[0] * scale == t0 and prefix.times_s[-1] * scale < t1):
         why = f"its span scaled by {scale:g} is not a prefix of {t0:g}–{t1:g} s"
     if why is not None:

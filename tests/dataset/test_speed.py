@@ -17,7 +17,7 @@ from simspad.dataset.estimate import (
     disk_needed_bytes,
     estimate_spec,
 )
-from simspad.dataset.executors import ExecutorConfig
+from simspad.dataset.executors import ExecutorConfig, plan_render_task
 from simspad.dataset.generate import generate
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec_validation import load_spec
@@ -110,6 +110,23 @@ def test_each_speed_gets_its_own_render_names_and_seeds(tmp_path):
                      "2025-01-01T00:00:00Z").renders
     assert late[1].speed_factor == 8.0 and late[1].prefix is None and late[1].seed != late[0].seed
     assert len({r.recording_hash for r in both.recordings}) == 8
+
+
+def test_speeds_chain_their_shared_keyframes(tmp_path):
+    """With three speeds each render starts with the next slower one's keyframes (×4 with ×2's, which start with
+    ×1's), at instants scaled by the speed ratio, and renders only the rest of its span."""
+    spec = load_spec(_spec(tmp_path, "speed = [4, 1, 2]", duration_s=0.01, resolution=(24, 18)))
+    renders = {r.speed_factor: r for r in make_plan(spec, "2025-01-01T00:00:00Z").renders
+               if r.sequence.scene == "office"}
+    planned = {}
+    plans = {k: planned.setdefault(renders[k].rel_dir, plan_render_task(renders[k], planned)) for k in (1.0, 2.0, 4.0)}
+    assert renders[4.0].prefix == renders[2.0] and renders[2.0].prefix == renders[1.0]
+    for slow, fast in ((1.0, 2.0), (2.0, 4.0)):
+        n = plans[slow].n_keyframes
+        assert plans[fast].n_shared == n and plans[fast].names[:n] == plans[slow].names
+        assert plans[fast].times_s[:n] == tuple(t * slow / fast for t in plans[slow].times_s)
+        assert plans[fast].times_s[-1] == pytest.approx(0.01) and plans[fast].n_keyframes > n
+        assert plans[fast].timeline["schedule"]["n_rendered_keyframes"] == plans[fast].n_keyframes - n
 
 
 @pytest.mark.parametrize("line, message", [
