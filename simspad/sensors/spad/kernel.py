@@ -27,8 +27,7 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
   bits that every z of a block shares decide most pixels at once, the rest by their own slice) was measured
   against this sampler on the scene of benchmarks/bench_spad.py: equal per 64 pixels at mean P(1) = 0.05
   (≈ 60 ns; the undecided pixels cost a data-dependent branch each), 2.5× slower at 0.3 (no faster with a
-  per-block fall-back to slices), while the bytes
-  where it would win (P(1) ≲ 0.03) go to the sparse sampler.
+  per-block fall-back to slices), while the bytes where it would win (P(1) ≲ 0.03) go to the sparse sampler.
 
 Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
 (in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
