@@ -258,6 +258,40 @@ def test_tabulated_sparse_rows_follow_ramps_inside_long_runs():
     assert _chi2_ok(per_bin, -np.expm1(-per_call), npx)[0] > 3 * bound
 
 
+def test_dense_rows_follow_ramps_inside_long_runs():
+    """Keyframes 1.7 ms apart (≈ 166 bins per run), gate 8 µs of a 10.24 µs bin (gates that straddle a keyframe
+    are runs of one bin): Λ ramps 0.2 → 0.8 → 0.25 …, every byte dense, so z is advanced by its per-bin factor
+    inside each run. Per-bin counts follow Binomial(N, p_k) (χ²); z held at each run's first bin (a factor of 1)
+    is rejected by the same bound."""
+    from simspad.sensors.spad.kernel import DENSE_MIN_CANDIDATES
+
+    shape, n, chunk, gate = (32, 64), 2500, 500, 8e-6
+    p = SpadParams(gate_s=gate, **QUIET)
+    q = p.detection_area_m2
+    knots_t = np.array([0.0, 1.7e-3, 3.4e-3, 5.1e-3, 6.8e-3, 8.5e-3, 10.2e-3, 30e-3])
+    knots_lam = np.array([0.2, 0.8, 0.25, 0.6, 0.2, 0.8, 0.3, 0.3])
+    assert 8 * knots_lam.min() >= DENSE_MIN_CANDIDATES  # dense everywhere
+    starts = np.arange(n) * BIN_S
+    straddling = [(starts < t) & (t < starts + gate) for t in knots_t[1:-1]]
+    assert all(s.sum() == 1 for s in straddling)  # each keyframe inside the call has a run of one bin
+    frames = np.broadcast_to((knots_lam / (q * gate))[:, None, None], (knots_t.size, *shape)).astype(np.float32)
+    tl = Timeline.from_arrays(knots_t, frames)
+    knots_y32 = frames[:, 0, 0].astype(np.float64)
+    chunker = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(19))
+    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(chunk, n - k0)), shape[1]).sum(axis=(1, 2))
+                              for k0 in range(0, n, chunk)])
+    lam = np.array([q * _gate_integral(knots_t, knots_y32, s, s + gate) for s in starts])
+    npx = shape[0] * shape[1]
+    stat, dof, bound = _chi2_ok(per_bin, -np.expm1(-lam), npx)
+    assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
+    # runs: bins of one call inside one piece, and each straddling gate alone
+    run_id = np.searchsorted(knots_t, starts, side="right") * 2 + np.any(straddling, axis=0)
+    run_id = run_id * (n // chunk + 1) + np.arange(n) // chunk
+    first = np.r_[0, np.flatnonzero(np.diff(run_id)) + 1]
+    held = lam[first[np.searchsorted(first, np.arange(n), side="right") - 1]]
+    assert _chi2_ok(per_bin, -np.expm1(-held), npx)[0] > 3 * bound
+
+
 def test_dark_frames_reproduce_dcr_map():
     """No light: per-pixel counts over 2·10⁵ bins follow the DCR map; hot pixels are found at their rate."""
     p = SpadParams(gate_s=BIN_S, **QUIET)
