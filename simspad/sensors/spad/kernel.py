@@ -29,6 +29,15 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
   (≈ 60 ns; the undecided pixels cost a data-dependent branch each), 2.5× slower at 0.3 (no faster with a
   per-block fall-back to slices), while the bytes where it would win (P(1) ≲ 0.03) go to the sparse sampler.
 
+Where the time goes, per call of 512 bins of the scene of benchmarks/bench_spad.py (the kernel with parts
+removed, in one process): at mean P(1) = 0.05 of ≈ 200 ms, ≈ 12 fixed, ≈ 70 dense (20 % of the bytes), ≈ 60
+drawing the sparse candidates (≈ 4.5 M) and ≈ 60 thinning them; at 0.001 of ≈ 14 ms, ≈ 2.5 fixed, ≈ 4 storing
+the block (16 MB to memory), ≈ 4 drawing and ≈ 4 thinning. Tried against this kernel with the same bytes and no
+gain beyond the ± 5–10 % between alternating calls: thinning without branches (the exact Λ_k for every
+candidate: 1.14–1.2× slower), per-run bounds of Λ for the squeeze, candidates drawn in batches (in a function of their
+own) before thinning, a padded block (no cache-set aliasing between bins), and the dense set-up of each run
+computed for the dense bytes only instead of the whole row.
+
 Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
 (in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
 
