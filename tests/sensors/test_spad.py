@@ -192,6 +192,21 @@ def _gate_integral(knots_t, knots_y, a, b):
     return np.trapezoid(np.interp(t, knots_t, knots_y), t)
 
 
+def _uniform_scene_counts(knots_t, knots_y, shape, n, p, seed, chunk=500):
+    """A uniform scene whose flux (photons s⁻¹ m⁻²) is ``knots_y`` at ``knots_t``, linear in between, simulated over
+    ``n`` bins in calls of ``chunk`` bins: ones per bin (over the pixels), the exact Λ of each bin's gate, and the
+    knots as the timeline stores them (float32, as float64)."""
+    frames = np.broadcast_to(np.asarray(knots_y)[:, None, None], (knots_t.size, *shape)).astype(np.float32)
+    tl = Timeline.from_arrays(knots_t, frames)
+    knots_y32 = frames[:, 0, 0].astype(np.float64)
+    chunker = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(seed))
+    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(chunk, n - k0)), shape[1]).sum(axis=(1, 2))
+                              for k0 in range(0, n, chunk)])
+    starts = np.arange(n) * BIN_S
+    lam = np.array([p.detection_area_m2 * _gate_integral(knots_t, knots_y32, s, s + p.gate_s) for s in starts])
+    return per_bin, lam, knots_y32
+
+
 @pytest.mark.parametrize("peak_lambda,shape", [(0.6, (16, 24)), (0.03, (96, 64))])  # dense; sparse + thinning
 def test_time_varying_ramp_integrates_exactly(peak_lambda, shape):
     """Keyframes every 7.3 µs alternate dark and bright, gate 6 µs: most gates straddle knots.
@@ -210,14 +225,8 @@ def test_time_varying_ramp_integrates_exactly(peak_lambda, shape):
     q = p.detection_area_m2
     peak = peak_lambda / (q * gate)
     knots_y = np.where(np.arange(knots_t.size) % 2 == 0, 0.05, 1.0) * peak * np.linspace(0.3, 1.0, knots_t.size)
-    frames = np.broadcast_to(knots_y[:, None, None], (knots_t.size, *shape)).astype(np.float32)
-    tl = Timeline.from_arrays(knots_t, frames)
-    knots_y32 = frames[:, 0, 0].astype(np.float64)
-    chunker = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(7))
-    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(500, n - k0)), shape[1]).sum(axis=(1, 2))
-                              for k0 in range(0, n, 500)])
+    per_bin, lam, knots_y32 = _uniform_scene_counts(knots_t, knots_y, shape, n, p, seed=7)
     starts = np.arange(n) * BIN_S
-    lam = np.array([q * _gate_integral(knots_t, knots_y32, s, s + gate) for s in starts])
     expected = -np.expm1(-lam)
     npx = shape[0] * shape[1]
     stat, dof, bound = _chi2_ok(per_bin, expected, npx)
@@ -243,14 +252,7 @@ def test_tabulated_sparse_rows_follow_ramps_inside_long_runs():
     assert runs_per_call * _TABLE_MIN_RUN_BINS <= chunk  # the call's runs are long enough to tabulate
     # each row's candidates (at least 8·Λ_min per byte and bin) outnumber its table's entries
     assert chunk * 8 * knots_lam.min() * (shape[1] // 8) >= runs_per_call * shape[1]
-    frames = np.broadcast_to((knots_lam / (q * BIN_S))[:, None, None], (knots_t.size, *shape)).astype(np.float32)
-    tl = Timeline.from_arrays(knots_t, frames)
-    knots_y32 = frames[:, 0, 0].astype(np.float64)
-    chunker = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(17))
-    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(chunk, n - k0)), shape[1]).sum(axis=(1, 2))
-                              for k0 in range(0, n, chunk)])
-    starts = np.arange(n) * BIN_S
-    lam = np.array([q * _gate_integral(knots_t, knots_y32, s, s + BIN_S) for s in starts])
+    per_bin, lam, _ = _uniform_scene_counts(knots_t, knots_lam / (q * BIN_S), shape, n, p, seed=17, chunk=chunk)
     npx = shape[0] * shape[1]
     stat, dof, bound = _chi2_ok(per_bin, -np.expm1(-lam), npx)
     assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
@@ -274,13 +276,7 @@ def test_dense_rows_follow_ramps_inside_long_runs():
     starts = np.arange(n) * BIN_S
     straddling = [(starts < t) & (t < starts + gate) for t in knots_t[1:-1]]
     assert all(s.sum() == 1 for s in straddling)  # each keyframe inside the call has a run of one bin
-    frames = np.broadcast_to((knots_lam / (q * gate))[:, None, None], (knots_t.size, *shape)).astype(np.float32)
-    tl = Timeline.from_arrays(knots_t, frames)
-    knots_y32 = frames[:, 0, 0].astype(np.float64)
-    chunker = SpadChunker(tl, 0.0, n, p, np.zeros(shape, np.float32), np.random.default_rng(19))
-    per_bin = np.concatenate([unpack_bits(chunker.chunk(k0, min(chunk, n - k0)), shape[1]).sum(axis=(1, 2))
-                              for k0 in range(0, n, chunk)])
-    lam = np.array([q * _gate_integral(knots_t, knots_y32, s, s + gate) for s in starts])
+    per_bin, lam, _ = _uniform_scene_counts(knots_t, knots_lam / (q * gate), shape, n, p, seed=19, chunk=chunk)
     npx = shape[0] * shape[1]
     stat, dof, bound = _chi2_ok(per_bin, -np.expm1(-lam), npx)
     assert dof - (bound - dof) < stat < bound, (stat, dof, bound)
