@@ -5,7 +5,8 @@ Run: ``python benchmarks/bench_spad.py [--size 512] [--duration-ms 10] [--quick]
 
 1. Throughput: a 512×512 textured scene whose brightness varies in time (keyframes every 1 ms, as the renderer's
    minimum rate), scaled so that the mean detection probability per bin spans ~0.1 % … ~90 % (over the run's
-   pixels and bins, dark counts included: the fraction of ones in the recording). For each level, SimSPAD (:func:`simspad.sensors.spad.simulate_spad` into a real recording through
+   pixels and bins, dark counts included: the fraction of ones in the recording). For each level, SimSPAD
+   (:func:`simspad.sensors.spad.simulate_spad` into a real recording through
    :class:`~simspad.io.recording.RecordingWriter`, afterpulsing and crosstalk on) and a naive reference (one
    uniform number per pixel per bin compared with the exact per-bin probability, packed in NumPy and written to
    an uncompressed HDF5 dataset with h5py) produce the same bins in the same process. Printed: Gbit/s of each
@@ -38,6 +39,7 @@ import h5py
 import numpy as np
 
 from simspad.io.recording import RecordingWriter
+from simspad.physics.spad_statistics import detection_probability
 from simspad.radiance.timeline import Timeline
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad import SpadChunker, chunk_bins, h5_chunk_bins, pack_bits, simulate_spad
@@ -71,30 +73,33 @@ def scene(size: int, duration_s: float, mean_probability: float, params: SpadPar
     base = texture(size, rng)
     times = np.arange(0.0, duration_s + 1e-3, 1e-3)
     modulation = 1.0 + 0.3 * np.sin(2 * np.pi * 37.0 * times)
-    q_gate = params.detection_area_m2 * params.gate_s
-    if dcr_cps is None:
-        flux = base.astype(np.float64).ravel()[None, :]
-        dark = np.zeros((1, 1))
-    else:
+    q, gate = params.detection_area_m2, params.gate_s
+    relative = base.astype(np.float64).ravel()[None, :]  # [instants, pixels], flux per unit of the scale below
+    dark = 0.0
+    if dcr_cps is not None:
         # 8 instants spread over the run stand for its bins: P(1) is smooth in the modulation, so the mean over 8
         # is within ~0.1 % of the mean over every bin
         instants = (np.arange(8) + 0.5) / 8 * duration_s
-        flux = base.astype(np.float64).ravel()[None, :] * np.interp(instants, times, modulation)[:, None]
-        dark = np.asarray(dcr_cps, dtype=np.float64).ravel()[None, :] * params.gate_s
-        floor = float(np.mean(-np.expm1(-dark)))
+        relative = relative * np.interp(instants, times, modulation)[:, None]
+        dark = np.asarray(dcr_cps, dtype=np.float64).ravel()
+        floor = dark_probability(dcr_cps, params)
         if mean_probability <= floor:
             raise ValueError(f"mean P(1) = {mean_probability:g} is at or below the dark counts' own {floor:.2g}")
-    # find the flux scale giving that mean P(1) (monotone: bisection)
-    lo, hi = 1e-9, 1e6
+    # find the flux scale (photons s⁻¹ m⁻² per unit of the texture) giving that mean P(1) (monotone: bisection)
+    lo, hi = 1e-9 / (q * gate), 1e6 / (q * gate)
     for _ in range(60):
         mid = math.sqrt(lo * hi)
-        if np.mean(-np.expm1(-(flux * mid + dark))) < mean_probability:
+        if np.mean(detection_probability(relative * mid, q, gate, dark)) < mean_probability:
             lo = mid
         else:
             hi = mid
-    scale = lo / q_gate
-    frames = (base[None] * modulation[:, None, None] * scale).astype(np.float32)
+    frames = (base[None] * modulation[:, None, None] * lo).astype(np.float32)
     return Timeline.from_arrays(times, frames)
+
+
+def dark_probability(dcr_cps: np.ndarray, params: SpadParams) -> float:
+    """Mean P(1) per bin over the pixels from the dark counts alone."""
+    return float(np.mean(detection_probability(0.0, params.detection_area_m2, params.gate_s, dcr_cps)))
 
 
 def naive_runs(tl: Timeline, t0: float, bin_s: float, gate: float, k0: int, m: int):
@@ -201,7 +206,7 @@ def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]
     # simulate_spad draws its dark count map first from its generator (seed 1 in _simspad_to_h5): the same map
     # here lets each level be the fraction of ones the recording holds, dark counts included
     dcr = dcr_map((size, size), params, np.random.default_rng(1))
-    p_dark = float(np.mean(-np.expm1(-dcr.astype(np.float64) * params.gate_s)))
+    p_dark = dark_probability(dcr, params)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         _simspad_to_h5(scene(32, 0.002, 0.1, params), 0.002, params, f"{tmp}/warm.h5")  # numba cache load

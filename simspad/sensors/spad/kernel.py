@@ -426,13 +426,13 @@ def spad_chunk(out, events, layout, response, seed):
                 # z·2¹⁶ and the per-bin factor for the whole row (an inlined exponential: the loop vectorises); a
                 # run of one bin (a gate straddling a keyframe: about every other run when keyframes are 1 ms
                 # apart) needs no factor, and its exponentials are half the set-up
-                if (layout.run_k0[r + 1] if r + 1 < n_runs else m) == k + 1:
-                    for x in range(W):
-                        lam_row[x] = _TWO16 * exp_fast(-max(lam_row[x], 0.0))
-                        slope_row[x] = 1.0
+                one_bin = (layout.run_k0[r + 1] if r + 1 < n_runs else m) == k + 1
+                for x in range(W):
+                    lam_row[x] = _TWO16 * exp_fast(-max(lam_row[x], 0.0))
+                if one_bin:
+                    slope_row[:W] = 1.0
                 else:
                     for x in range(W):
-                        lam_row[x] = _TWO16 * exp_fast(-max(lam_row[x], 0.0))
                         slope_row[x] = exp_fast(-slope_row[x])
                 for i in range(n_dense):
                     for bit in range(8):
