@@ -11,10 +11,12 @@ Run: ``python benchmarks/bench_spad.py [--size 512] [--duration-ms 10] [--quick]
    uniform number per pixel per bin compared with the exact per-bin probability, packed in NumPy and written to
    an uncompressed HDF5 dataset with h5py) produce the same bins in the same process. Printed: Gbit/s of each
    (process CPU time, file written and closed; SimSPAD's the median of 5 runs), the ratio, and the real-time
-   factor against the SwissSPAD2 (512×512 at 97.7 kHz = 25.6 Gbit/s).
+   factor against the SwissSPAD2 (512×512 at 97.7 kHz = 25.6 Gbit/s). SimSPAD runs twice per level: storing
+   its bits uncompressed (``compression = "none"``, as the reference does) and with the default Zstandard
+   filter (the same bits; its CPU time and file size are printed beside).
 2. Storage filters: the packed bits of one streamed chunk at P(1) = 0.001 and 0.05 written with each candidate
-   HDF5 filter (none, lzf, gzip, and Blosc2 + bit-shuffle from ``hdf5plugin`` when it is installed): size,
-   write and read speed.
+   HDF5 filter (SimSPAD's choices none, gzip and zstd; lzf, gzip with byte shuffle, LZ4, and Blosc2 with
+   bit-shuffle from ``hdf5plugin``): size, write and read speed.
 3. Warm-up: a fresh Python process imports the simulator and runs a tiny chunk (numba's on-disk cache).
 4. Streaming memory: :func:`simspad.sensors.spad.simulate_spad` writes real HDF5 recordings of 1× and 4× the
    duration in fresh subprocesses; their peak resident memory (``ru_maxrss``) and the traced NumPy peak
@@ -24,6 +26,7 @@ Run: ``python benchmarks/bench_spad.py [--size 512] [--duration-ms 10] [--quick]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -36,8 +39,10 @@ import tracemalloc
 from pathlib import Path
 
 import h5py
+import hdf5plugin
 import numpy as np
 
+from simspad.io.compression import SPAD_COMPRESSIONS
 from simspad.io.recording import RecordingWriter
 from simspad.physics.spad_statistics import detection_probability
 from simspad.radiance.timeline import Timeline
@@ -201,7 +206,8 @@ def _naive_to_h5(tl: Timeline, n: int, params: SpadParams, dcr: np.ndarray, path
 
 
 def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]:
-    params = SpadParams(gate_s=10.24e-6)
+    params = SpadParams(gate_s=10.24e-6, compression="none")
+    zstd = dataclasses.replace(params, compression="zstd")
     duration_s = duration_ms * 1e-3
     # simulate_spad draws its dark count map first from its generator (seed 1 in _simspad_to_h5): the same map
     # here lets each level be the fraction of ones the recording holds, dark counts included
@@ -218,6 +224,9 @@ def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]
             c_fast = float(np.median([_simspad_to_h5(tl, duration_s, params, f"{tmp}/simspad_{level}_{i}.h5")
                                       for i in range(FAST_REPEATS)]))
             os.replace(f"{tmp}/simspad_{level}_0.h5", path)
+            c_zstd = float(np.median([_simspad_to_h5(tl, duration_s, zstd, f"{tmp}/zstd_{level}_{i}.h5")
+                                      for i in range(FAST_REPEATS)]))
+            mb_zstd = os.path.getsize(f"{tmp}/zstd_{level}_0.h5") / 2**20
             with h5py.File(path, "r") as f:
                 n = f["spad/bits"].shape[0]
                 if not np.array_equal(f["spad/dcr_cps"][()], dcr):
@@ -229,19 +238,18 @@ def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]
             rows.append(dict(level=level, p_dark=p_dark, p_fast=fraction_of_ones(path, "spad/bits", size),
                              p_naive=fraction_of_ones(f"{tmp}/naive_{level}.h5", "bits", size), gbit_fast=gbit_fast,
                              gbit_naive=gbit_naive, speedup=c_naive / c_fast, rtf=gbit_fast / SWISSSPAD2_GBIT_S,
-                             mb_fast=os.path.getsize(path) / 2**20))
+                             mb_fast=os.path.getsize(path) / 2**20, speedup_zstd=c_naive / c_zstd,
+                             mb_zstd=mb_zstd))
     return rows
 
 
 # ------------------------------------------------------------------------------------------------ storage filters
 def filter_candidates() -> list[tuple[str, dict]]:
-    """HDF5 filters to compare: built-in ones, and Blosc2 from hdf5plugin when it is installed."""
-    rows = [("none", {}), ("lzf", {"compression": "lzf"}), ("gzip 1", {"compression": "gzip", "compression_opts": 1}),
-            ("gzip 4 + shuffle", {"compression": "gzip", "compression_opts": 4, "shuffle": True})]
-    try:
-        import hdf5plugin  # deferred: optional, only to measure what Blosc2 would cost
-    except ImportError:
-        return rows
+    """HDF5 filters to compare: SimSPAD's choices (``compression = ...``) and other candidates."""
+    rows = [(f"{name} (SimSPAD)", dict(kwargs)) for name, kwargs in SPAD_COMPRESSIONS.items()]
+    rows += [("lzf", {"compression": "lzf"}),
+             ("gzip 4 + shuffle", {"compression": "gzip", "compression_opts": 4, "shuffle": True}),
+             ("lz4", dict(hdf5plugin.LZ4()))]
     for cname in ("lz4", "zstd"):
         rows.append((f"blosc2 {cname} + bitshuffle",
                      dict(hdf5plugin.Blosc2(cname=cname, clevel=5, filters=hdf5plugin.Blosc2.BITSHUFFLE))))
@@ -349,15 +357,17 @@ def main() -> None:
           "included: the fraction of ones the recording should hold); P SimSPAD / P naive: the fraction of ones "
           "each file holds (SimSPAD also adds afterpulses and crosstalk)")
     print(f"{'target P(1)':>11} {'~lux':>8} {'P SimSPAD':>9} {'P naive':>8} {'SimSPAD Gbit/s':>15} "
-          f"{'naive Gbit/s':>13} {'speed-up':>9} {'× real time':>12} {'file MB':>8}")
+          f"{'naive Gbit/s':>13} {'speed-up':>9} {'× real time':>12} {'file MB':>8} {'zstd speed-up':>14} "
+          f"{'zstd MB':>8}")
     rows = throughput(args.size, args.duration_ms, levels)
     for r in rows:
         print(f"{r['level']:11.3f} {lux_for_probability(r['level'] - r['p_dark'], params):8.3g} {r['p_fast']:9.4f} "
               f"{r['p_naive']:8.4f} {r['gbit_fast']:15.2f} {r['gbit_naive']:13.3f} {r['speedup']:8.1f}× "
-              f"{r['rtf']:12.3f} {r['mb_fast']:8.1f}")
+              f"{r['rtf']:12.3f} {r['mb_fast']:8.1f} {r['speedup_zstd']:13.1f}× {r['mb_zstd']:8.1f}")
     print(f"(Gbit/s from process CPU time, single thread, HDF5 write and close included on both sides; real-time "
           f"factor against SwissSPAD2 {SWISSSPAD2_GBIT_S:.1f} Gbit/s; ~lux = mid-grey scene illuminance for that "
-          f"mean P(1) less the dark counts' own {rows[0]['p_dark']:.2g}, at f/2)")
+          f"mean P(1) less the dark counts' own {rows[0]['p_dark']:.2g}, at f/2; speed-up and file MB: SimSPAD "
+          f"storing uncompressed like the reference; zstd: with its default filter, same bits)")
     print(f"\nStorage filters: one streamed chunk of packed bits ({chunk_bins(args.size, args.size)} bins of "
           f"{args.size}x{args.size}), HDF5 chunks of {h5_chunk_bins(args.size, args.size)} bins")
     print(f"{'P(1)':>6} {'filter':>26} {'file MB':>8} {'ratio':>7} {'write MB/s':>11} {'read MB/s':>10}")

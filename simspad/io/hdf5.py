@@ -14,6 +14,8 @@ import h5py
 import numpy as np
 
 from simspad.errors import InputError
+# registers the storage filters a recording may use (Zstandard on /spad/bits) before any file is opened
+from simspad.io.compression import SPAD_COMPRESSIONS  # noqa: F401
 from simspad.io.safe_paths import refuse_hdf5_links
 
 _REQUIRED = object()

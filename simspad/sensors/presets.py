@@ -14,10 +14,13 @@ import typing
 from dataclasses import dataclass
 from typing import Literal, Union
 
+from simspad.io.compression import SPAD_COMPRESSIONS
 from simspad.io.recording import SENSOR_KINDS
 from simspad.physics.radiometry import detection_area_m2
 
 Auto = Literal["auto"]
+#: The SPAD stream's storage filters, by name (:data:`simspad.io.compression.SPAD_COMPRESSIONS`).
+SpadCompression = Literal[tuple(SPAD_COMPRESSIONS)]
 
 
 class _PixelArea:
@@ -58,6 +61,11 @@ class SpadParams(_PixelArea):
     """Probability that a detection triggers a spurious detection in the next bin."""
     crosstalk_probability: float = 0.001
     """Probability that a detection triggers each of the 4-neighbours in the same bin (total ≈ 4×)."""
+    compression: SpadCompression = "zstd"
+    """Storage filter of the packed bits (``/spad/bits``): ``"zstd"`` (Zstandard level 1; 4–10× smaller at the
+    bundled scenes' light levels, readable with h5py after ``import hdf5plugin``), ``"gzip"`` (level 1; read by
+    any HDF5 reader) or ``"none"`` (fastest; one bit per pixel and bin). The bits are the same whichever is chosen
+    (:mod:`simspad.io.compression`)."""
 
 
 @dataclass(frozen=True)
@@ -171,6 +179,11 @@ def _coerce(name: str, value, hint):
     allowed = typing.get_args(hint) if typing.get_origin(hint) is Union else (hint,)
     if value == "auto" and Auto in allowed:
         return value
+    choices = [c for a in allowed if typing.get_origin(a) is Literal and a is not Auto for c in typing.get_args(a)]
+    if choices:
+        if value in choices:
+            return value
+        raise ValueError(f"{name} must be one of {', '.join(repr(c) for c in choices)}, got {value!r}")
     if bool in allowed:
         if isinstance(value, bool):
             return value

@@ -166,6 +166,8 @@ BAD = {
                              "unknown spad parameter 'gate_ns'"),
     "sensor_field_type": (GOOD.replace("exposure_s = 0.002", 'exposure_s = "long"'), ["sensors.frames.exposure_s"],
                           "exposure_s must be"),
+    "spad_compression": (GOOD.replace("gate_s = 1e-6", 'gate_s = 1e-6\ncompression = "lz4"'),
+                         ["sensors.spad.compression"], "compression must be one of 'none', 'gzip', 'zstd'"),
     "missing_scene": (GOOD.replace('scene = "myscene"\ntrajectory = "dolly.csv"',
                                    'scene = "no-such-scene"\ntrajectory = "dolly.csv"'),
                       ["sequences[0].scene"], "unknown scene 'no-such-scene'"),

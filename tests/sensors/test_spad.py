@@ -497,3 +497,58 @@ def test_sampler_choice_per_row_keeps_every_pixel_binomial():
         assert dof - (bound - dof) < stat < bound, (rows, stat, dof, bound)
         wrong = -np.expm1(-1.05 * q * BIN_S * flux[rows][lit].astype(np.float64))
         assert _chi2_ok(counts[rows][lit], wrong, n)[0] > bound
+
+
+# ---------------------------------------------------------------------------------------------------- storage
+#: HDF5 filter id of each storage choice on /spad/bits (None: stored unfiltered).
+_FILTER_IDS = {"none": None, "gzip": 1, "zstd": 32015}
+
+
+def _textured_timeline(mean_lambda=0.01, t_end=0.02):
+    """Random per-pixel flux (log-normal, ~1 decade) with a mean of ``mean_lambda`` detections per bin, constant
+    over ``t_end``."""
+    p = SpadParams(gate_s=BIN_S)
+    y = np.exp(np.random.default_rng(0).standard_normal((H, W)))
+    flux = y / y.mean() * mean_lambda / (p.detection_area_m2 * BIN_S)
+    return Timeline.from_arrays([0.0, t_end], np.stack([flux, flux]).astype(np.float32))
+
+
+def test_every_storage_filter_stores_the_same_bits(tmp_path):
+    """``compression`` changes how /spad/bits is stored, never the bits: same seed, same bits under every filter,
+    each file carries the filter asked for, and at a low detection probability the compressed files are smaller."""
+    tl = _textured_timeline()
+    stored, sizes = {}, {}
+    for name, filter_id in _FILTER_IDS.items():
+        p = SpadParams(gate_s=BIN_S, compression=name)
+        path = tmp_path / f"{name}.h5"
+        with RecordingWriter(path, {"width": W, "height": H, "duration_s": 0.01, "lux": 1.0}) as wr:
+            simulate_spad(wr, tl, 0.0, 0.01, p, np.random.default_rng(11))
+        with open_recording(path) as rec:
+            ds = rec.spad._dataset("bits")
+            plist = ds.id.get_create_plist()
+            ids = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
+            assert ids == ([] if filter_id is None else [filter_id]), name
+            assert rec.spad.attrs["compression"] == name
+            stored[name] = ds[()]
+        sizes[name] = path.stat().st_size
+    assert 0.001 < np.bitwise_count(stored["none"]).mean() / 8 < 0.05  # sparse enough that compression must pay
+    assert np.array_equal(stored["gzip"], stored["none"]) and np.array_equal(stored["zstd"], stored["none"])
+    assert sizes["zstd"] < 0.5 * sizes["none"] and sizes["gzip"] < 0.5 * sizes["none"]
+
+
+def test_zstd_recording_reads_with_h5py_and_hdf5plugin_alone(tmp_path):
+    """An outside reader (h5py with hdf5plugin's filters, no SimSPAD) decodes the compressed bits, as
+    docs/format.md tells users to read them."""
+    import subprocess
+    import sys
+
+    tl = _textured_timeline()
+    path = tmp_path / "r.h5"
+    with RecordingWriter(path, {"width": W, "height": H, "duration_s": 0.005, "lux": 1.0}) as wr:
+        simulate_spad(wr, tl, 0.0, 0.005, SpadParams(gate_s=BIN_S), np.random.default_rng(3))
+    with open_recording(path) as rec:
+        ones = int(np.bitwise_count(rec.spad._dataset("bits")[()]).sum(dtype=np.int64))
+    code = ("import sys, h5py, hdf5plugin, numpy as np; f = h5py.File(sys.argv[1], 'r'); "
+            "assert 'simspad' not in sys.modules; print(int(np.bitwise_count(f['spad/bits'][()]).sum(dtype=np.int64)))")
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True)
+    assert ones > 0 and int(out.stdout) == ones

@@ -38,6 +38,7 @@ import math
 import numpy as np
 
 from simspad.errors import SimSpadError
+from simspad.io.compression import SPAD_COMPRESSIONS
 from simspad.sensors.presets import SpadParams, params_to_attrs
 
 _FIELD = "sensors.spad"
@@ -93,6 +94,8 @@ def validate_params(params: SpadParams) -> None:
         ("hot_pixel_fraction", 0 <= params.hot_pixel_fraction <= 1, "must be in [0, 1]"),
         ("afterpulsing_probability", 0 <= params.afterpulsing_probability < 1, "must be in [0, 1)"),
         ("crosstalk_probability", 0 <= params.crosstalk_probability < 1, "must be in [0, 1)"),
+        ("compression", params.compression in SPAD_COMPRESSIONS,
+         "must be one of " + ", ".join(repr(name) for name in SPAD_COMPRESSIONS)),
     ]
     for name, ok, message in checks:
         if not ok:
