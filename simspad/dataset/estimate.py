@@ -219,7 +219,10 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
     gt_bytes = gt[1][1].stat().st_size - gt[0][1].stat().st_size
     gt_units = mp * (full - half) * gt_rate_hz
     costs.gt_s_per_mp_frame = max(gt_marginal, 1e-9) / gt_units
-    costs.bytes_per["gt"] = max(gt_bytes, 0) / gt_units
+    # bytes per *stored* frame: a probe's last chunk holds whole chunks' room for its few frames (25 frames take
+    # 32 frames' bytes), which would inflate a full-size recording's ground truth by up to half
+    stored = [_gt_stored_frames(p) for _, p in gt]
+    costs.bytes_per["gt"] = max(gt_bytes, 0) / (mp * max(stored[1] - stored[0], 1))
     for kind in params:
         (t1, p1), (t2, p2) = run([kind], half), run([kind], full)
         dt = max(t2 - t1 - gt_marginal, 1e-9)
@@ -247,11 +250,19 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
         units_full = {"spad": r.spad.n_bins * w * h / 1e9 if "spad" in params else 0.0,
                       "frames": r.frames.n_frames * mp if "frames" in params else 0.0,
                       "events": mp * full if "events" in params else 0.0}
-    gt_full = mp * full * gt_rate_hz
+    gt_full = mp * _gt_stored_frames(p_all)
     costs.recording_fixed_s = max(t_all - costs.gt_s_per_mp_frame * gt_full - sum(
         costs.sim_s_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
     costs.recording_fixed_bytes = max(p_all.stat().st_size - costs.bytes_per["gt"] * gt_full - sum(
         costs.bytes_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
+
+
+def _gt_stored_frames(path: Path) -> int:
+    """Frames of ``/gt/flux`` that the file's chunks have room for (its frames rounded up to whole chunks)."""
+    with open_recording(path) as rec:
+        ds = rec.gt._dataset("flux")
+        rows = ds.chunks[0]
+        return -(-ds.shape[0] // rows) * rows
 
 
 def measure_unit_costs(spec, log=lambda msg: None) -> UnitCosts:
