@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers.evaluation_data import write_dataset
+
 
 def _workers_started(pid: int) -> bool:
     try:
@@ -43,13 +45,22 @@ def _press_ctrl_c_twice(simspad_cli, *args, gap_s: float) -> subprocess.Complete
     return subprocess.CompletedProcess(proc.args, proc.returncode, out.decode(), err.decode())
 
 
+@pytest.fixture(scope="module")
+def long_evaluation(tmp_path_factory) -> Path:
+    """A dataset whose evaluation lasts seconds after its workers start: the session's shared one (two
+    recordings) is scored in ~0.3 s once the workers have imported, so both presses could land after the command
+    had returned, while the interpreter shuts down (its signal handlers reset: death by SIGINT, no line)."""
+    return write_dataset(tmp_path_factory.mktemp("interrupts") / "data", luxes=(1.0, 3.0, 10.0, 30.0, 100.0, 300.0),
+                         sequences=("ramp", "slope"))
+
+
 @pytest.mark.parametrize("gap_s", [0.05, 0.5])
 @pytest.mark.parametrize("command", ["generate", "evaluate"])
-def test_double_ctrl_c_is_one_line(command, gap_s, tmp_path, simspad_cli, evaluation_dataset):
+def test_double_ctrl_c_is_one_line(command, gap_s, tmp_path, simspad_cli, long_evaluation):
     if command == "generate":
         args = ("generate", "mini", "--out", tmp_path / "mini", "--workers", 2)
     else:
-        args = ("evaluate", evaluation_dataset, "--out", tmp_path / "res")
+        args = ("evaluate", long_evaluation, "--out", tmp_path / "res")
     proc = _press_ctrl_c_twice(simspad_cli, *args, gap_s=gap_s)
     lines = [ln for ln in proc.stderr.replace("\r", "\n").splitlines() if ln.strip()]
     assert proc.returncode == 130, proc.stderr[-3000:]
