@@ -19,16 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simspad.physics.colour_tables import PHOTONS_PER_LUX, SRGB_TO_Y, photons_per_lux_from_spectrum
+
 #: Middle-grey reflectance of incident-light metering: the scene's mean luminance is ρ̄·E/π.
 MEAN_REFLECTANCE = 0.18
 #: Default f-number and lens transmission of the camera equation.
 DEFAULT_F_NUMBER = 2.0
 DEFAULT_LENS_TRANSMISSION = 0.9
 DEFAULT_ILLUMINANT = "D65"
-#: Wavelength band (nm) over which photons of an illuminant are counted.
-VISIBLE_BAND_NM = (380.0, 780.0)
-#: Luminous efficiency function used for lux.
-PHOTOPIC_LEF = "CIE 1924 Photopic Standard Observer"
 
 
 @dataclass(frozen=True)
@@ -73,6 +71,11 @@ class Optics:
 def photons_per_lux(illuminant: str | float = DEFAULT_ILLUMINANT) -> float:
     """Photon irradiance per lux of an illuminant, photons s⁻¹ m⁻² lx⁻¹.
 
+    The named illuminants of colour-science come from :data:`~simspad.physics.colour_tables.PHOTONS_PER_LUX`
+    (the same numbers, tabulated so that a process need not import colour-science); a wavelength or a name
+    spelled otherwise is computed with colour-science
+    (:func:`~simspad.physics.colour_tables.photons_per_lux_from_spectrum`).
+
     Parameters
     ----------
     illuminant : str or float
@@ -84,35 +87,14 @@ def photons_per_lux(illuminant: str | float = DEFAULT_ILLUMINANT) -> float:
     ValueError
         Unknown illuminant name.
     """
-    import colour  # deferred: colour-science takes ~2.5 s to import; called once per illuminant (cached)
-    from colour.constants import CONSTANT_K_M, CONSTANT_LIGHT_SPEED, CONSTANT_PLANCK  # deferred: as above
-
-    lef = colour.SDS_LEFS[PHOTOPIC_LEF]
-    if isinstance(illuminant, (int, float, np.floating)):
-        wavelength_nm = float(illuminant)
-        v = float(np.interp(wavelength_nm, lef.wavelengths, lef.values, left=0.0, right=0.0))
-        if v <= 0:
-            raise ValueError(f"illuminant wavelength {wavelength_nm} nm is outside the visible band")
-        return wavelength_nm * 1e-9 / (CONSTANT_PLANCK * CONSTANT_LIGHT_SPEED) / (CONSTANT_K_M * v)
-    try:
-        sd = colour.SDS_ILLUMINANTS[illuminant]
-    except KeyError:
-        known = ", ".join(k for k in ("D65", "D50", "A", "E", "F2", "LED-B3") if k in colour.SDS_ILLUMINANTS)
-        raise ValueError(f"unknown illuminant {illuminant!r} (for example {known})") from None
-    lo, hi = VISIBLE_BAND_NM
-    keep = (sd.wavelengths >= lo) & (sd.wavelengths <= hi)
-    wl_nm, spd = sd.wavelengths[keep], sd.values[keep]
-    v = np.interp(wl_nm, lef.wavelengths, lef.values, left=0.0, right=0.0)
-    photons = np.trapezoid(spd * wl_nm * 1e-9 / (CONSTANT_PLANCK * CONSTANT_LIGHT_SPEED), wl_nm)
-    lux = CONSTANT_K_M * np.trapezoid(v * spd, wl_nm)
-    return float(photons / lux)
+    if isinstance(illuminant, str) and illuminant in PHOTONS_PER_LUX:
+        return PHOTONS_PER_LUX[illuminant]
+    return photons_per_lux_from_spectrum(illuminant)
 
 
 @functools.lru_cache(maxsize=1)
 def _rgb_to_y_weights() -> np.ndarray:
-    import colour  # deferred: colour-science takes ~2.5 s to import; called once (cached)
-
-    return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1], dtype=np.float32)
+    return np.asarray(SRGB_TO_Y, dtype=np.float32)
 
 
 def luminance_from_rgb(rgb: np.ndarray) -> np.ndarray:
