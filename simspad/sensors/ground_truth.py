@@ -63,9 +63,16 @@ def write_ground_truth(writer, flux_tl, t0: float, t1: float, rate_hz: float = d
         depth = writer.append_dataset("gt/depth", (H, W), np.float32, chunk_rows=rows, attrs={"units": "m"})
     for i in range(0, len(t), rows):
         ts = t[i : i + rows]
-        flux.append(np.stack([flux_tl.sample(ti) for ti in ts]))
+        # flux and depth of an instant together: both come from the same two keyframes, which the timeline's
+        # small cache still holds (a pass of flux over a chunk and then one of depth decoded every keyframe twice)
+        flux_rows, depth_rows = [], []
+        for ti in ts:
+            flux_rows.append(flux_tl.sample(ti))
+            if depth is not None:
+                depth_rows.append(flux_tl.depth(ti))
+        flux.append(np.stack(flux_rows))
         if depth is not None:
-            depth.append(np.stack([flux_tl.depth(ti) for ti in ts]))
+            depth.append(np.stack(depth_rows))
     if flux_tl.poses is not None:
         sel = pose_indices(flux_tl.times_s, t0, t1)
         writer.write_dataset("poses/t", np.asarray(flux_tl.times_s[sel], np.float64), attrs={"units": "s"})
