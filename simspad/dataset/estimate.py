@@ -65,7 +65,7 @@ CALIBRATION_SPP = (4, 64)  # powers of four: the low-discrepancy sampler takes t
 CALIBRATION_SPAN_S = 0.02
 #: Throughput probe: size (px) and the two simulated durations (s) whose difference gives marginal costs. 40 ms
 #: between them: with 16 ms, an event camera's marginal cost on 64 × 48 px (~30 ms of CPU) was within the noise of
-#: the process's CPU time and came out as ≈ 0 in one run of three.
+#: the process's CPU time and came out as ≈ 0 in one estimate of five.
 PROBE_SIZE_PX = (64, 48)
 PROBE_DURATIONS_S = (0.01, 0.05)
 MIB = 1024**2
