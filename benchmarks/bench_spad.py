@@ -189,6 +189,16 @@ def _simspad_to_h5(tl: Timeline, duration_s: float, params: SpadParams, path: st
     return time.process_time() - c
 
 
+def _median_simspad_s(tl: Timeline, duration_s: float, params: SpadParams, path: str) -> float:
+    """Median CPU seconds of :data:`FAST_REPEATS` runs of :func:`_simspad_to_h5` (a new file each; the first is
+    kept as ``path``). A ~0.1–1 s run is short enough that a burst of other work on a shared machine can double
+    one, while the naive reference's ~10 s averages it out."""
+    stem = path.removesuffix(".h5")
+    seconds = [_simspad_to_h5(tl, duration_s, params, f"{stem}_{i}.h5") for i in range(FAST_REPEATS)]
+    os.replace(f"{stem}_0.h5", path)
+    return float(np.median(seconds))
+
+
 def _naive_to_h5(tl: Timeline, n: int, params: SpadParams, dcr: np.ndarray, path: str) -> float:
     """CPU seconds of the naive reference writing its packed bits to an uncompressed HDF5 dataset."""
     size = tl.width
@@ -219,14 +229,9 @@ def throughput(size: int, duration_ms: float, levels: list[float]) -> list[dict]
         for level in levels:
             tl = scene(size, duration_s, level, params, dcr_cps=dcr)
             path = f"{tmp}/simspad_{level}.h5"
-            # SimSPAD's ~0.1–1 s run is timed FAST_REPEATS times (a new file each) and the median kept: on a shared
-            # machine a burst of other work can double one short run, while the naive reference's ~10 s averages it out
-            c_fast = float(np.median([_simspad_to_h5(tl, duration_s, params, f"{tmp}/simspad_{level}_{i}.h5")
-                                      for i in range(FAST_REPEATS)]))
-            os.replace(f"{tmp}/simspad_{level}_0.h5", path)
-            c_zstd = float(np.median([_simspad_to_h5(tl, duration_s, zstd, f"{tmp}/zstd_{level}_{i}.h5")
-                                      for i in range(FAST_REPEATS)]))
-            mb_zstd = os.path.getsize(f"{tmp}/zstd_{level}_0.h5") / 2**20
+            c_fast = _median_simspad_s(tl, duration_s, params, path)
+            c_zstd = _median_simspad_s(tl, duration_s, zstd, f"{tmp}/zstd_{level}.h5")
+            mb_zstd = os.path.getsize(f"{tmp}/zstd_{level}.h5") / 2**20
             with h5py.File(path, "r") as f:
                 n = f["spad/bits"].shape[0]
                 if not np.array_equal(f["spad/dcr_cps"][()], dcr):

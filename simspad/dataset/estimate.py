@@ -32,6 +32,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from simspad.dataset.directory import recording_rel_path
@@ -261,8 +262,8 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
 
 def _gt_stored_frames(path: Path) -> int:
     """Frames of ``/gt/flux`` that the file's chunks have room for (its frames rounded up to whole chunks)."""
-    with open_recording(path) as rec:
-        ds = rec.gt._dataset("flux")
+    with h5py.File(path, "r") as f:  # the probe's own file: its HDF5 chunk layout, which no recording view shows
+        ds = f["gt/flux"]
         rows = ds.chunks[0]
         return -(-ds.shape[0] // rows) * rows
 

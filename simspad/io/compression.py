@@ -24,9 +24,3 @@ SPAD_COMPRESSIONS: dict[str, dict] = {
     # smallest of the fast filters; needs the hdf5plugin filter to read
     "zstd": dict(hdf5plugin.Zstd(clevel=1)),
 }
-
-
-def spad_filter(name: str) -> dict:
-    """h5py ``create_dataset`` keyword arguments of the SPAD storage filter ``name`` (a key of
-    :data:`SPAD_COMPRESSIONS`); a copy, so the caller may change it."""
-    return dict(SPAD_COMPRESSIONS[name])

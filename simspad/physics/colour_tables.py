@@ -87,8 +87,9 @@ PHOTONS_PER_LUX: dict[str, float] = {
 
 
 def photons_per_lux_from_spectrum(illuminant: str | float) -> float:
-    """:func:`simspad.physics.radiometry.photons_per_lux` computed with colour-science: ∫S(λ)·λ/(hc) dλ ÷ (K_m·∫V(λ)S(λ) dλ) over
-    :data:`VISIBLE_BAND_NM` (S: the illuminant's spectral distribution; a single line for a wavelength)."""
+    """:func:`simspad.physics.radiometry.photons_per_lux` computed with colour-science:
+    ∫S(λ)·λ/(hc) dλ ÷ (K_m·∫V(λ)S(λ) dλ) over :data:`VISIBLE_BAND_NM` (S: the illuminant's spectral distribution;
+    a single line for a wavelength)."""
     import colour  # deferred: colour-science takes ~1.5 s to import (it loads matplotlib)
     from colour.constants import CONSTANT_K_M, CONSTANT_LIGHT_SPEED, CONSTANT_PLANCK  # deferred: as above
 

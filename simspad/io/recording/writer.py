@@ -250,13 +250,14 @@ class RecordingWriter:
         return ds
 
     def append_dataset(self, name: str, tail_shape: tuple, dtype, chunk_rows: int,
-                       attrs: dict | None = None, compression: str | None = None,
-                       n_rows: int | None = None, storage: dict | None = None) -> Appender:
+                       attrs: dict | None = None, n_rows: int | None = None,
+                       storage: dict | None = None) -> Appender:
         """Create a dataset of shape ``(0, *tail_shape)`` growable along axis 0, chunked ``chunk_rows`` rows.
 
         With ``n_rows`` (the final length, when the caller knows it) the dataset is created at that length and
-        filled in place (no resize per chunk); exactly ``n_rows`` rows must then be appended. ``storage``: further
-        ``create_dataset`` keyword arguments choosing a filter (:mod:`simspad.io.compression`).
+        filled in place (no resize per chunk); exactly ``n_rows`` rows must then be appended. ``storage``: the
+        ``create_dataset`` keyword arguments of a filter (:data:`simspad.io.compression.SPAD_COMPRESSIONS`);
+        unfiltered without.
         """
         tail_shape = tuple(int(s) for s in tail_shape)
         chunk_rows = max(1, int(chunk_rows))
@@ -265,8 +266,7 @@ class RecordingWriter:
         else:
             rows, max_rows = 0, None
         ds = self.h5.create_dataset(name, shape=(rows, *tail_shape), maxshape=(max_rows, *tail_shape), dtype=dtype,
-                                    chunks=(chunk_rows, *tail_shape), track_times=False,
-                                    **{"compression": compression, **(storage or {})})
+                                    chunks=(chunk_rows, *tail_shape), track_times=False, **(storage or {}))
         for key, value in (attrs or {}).items():
             ds.attrs[key] = _attr_value(value)
         appender = Appender(ds)

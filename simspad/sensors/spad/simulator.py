@@ -14,7 +14,7 @@ import math
 import numpy as np
 from tqdm import tqdm
 
-from simspad.io.compression import spad_filter
+from simspad.io.compression import SPAD_COMPRESSIONS
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.spad.kernel import (
     DENSE_MIN_BYTES,
@@ -195,7 +195,7 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     bits = writer.append_dataset("spad/bits", (H, (W + 7) // 8), np.uint8,
                                  chunk_rows=min(h5_chunk_bins(H, W), max(n, 1)),
                                  attrs={"bit_order": "little", "axis_packed": "width"}, n_rows=n,
-                                 storage=spad_filter(params.compression))
+                                 storage=SPAD_COMPRESSIONS[params.compression])
     t_start = writer.append_dataset("spad/t_start", (), np.float64, chunk_rows=max(1, min(m, n)))
     chunker = SpadChunker(flux_tl, t0, n, resolved, dcr, rng)
     bar = tqdm(total=n, unit="bin", desc="spad", leave=False) if progress else None
