@@ -238,14 +238,17 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                     if existing:
                         log(f"render of {r.sequence.name}: {len(existing)} of {res['n_keyframes']} keyframes "
                             "already there (kept from an interrupted run)")
-                    bar_k.total += res["n_keyframes"] - (len(wanted) - len(todo_kf))
-                    bar_k.refresh()
+                    n_todo = res["n_keyframes"] - (len(wanted) - len(todo_kf))
                     if (r.prefix is not None and r.prefix.rel_dir in pending_renders
                             and any(i < n_shared for i in todo_kf)):
-                        # The slower render is still running: its keyframes are linked once it is done.
+                        # The slower render is still running: its keyframes are linked once it is done. They
+                        # join the bar's total only then: counted now, the ETA would price them as renders.
                         state.shared = [i for i in todo_kf if i < n_shared]
+                        state.deferred = set(state.shared)
                         todo_kf = [i for i in todo_kf if i >= n_shared]
                         state.left += 1
+                    bar_k.total += n_todo - len(state.deferred)
+                    bar_k.refresh()
                     state.left += _submit_chunks(queue, ex, r, res["plan"], todo_kf)
                     if warp:
                         state.anchors = list(wanted)
@@ -262,6 +265,7 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                             state.warp_chunks.append(res["warp"])
                             bar_k.update(c[-1] - c[0] + 1 - len(c))  # the keyframes between its anchors
                         else:
+                            bar_k.total += len(state.deferred.intersection(c))
                             bar_k.update(len(c))
                     elif state.error is None:
                         state.error = res.get("error")
@@ -295,6 +299,7 @@ class _ChunkedRender:
     warp_started: bool = False  # its synthesis chunks are submitted
     warp_chunks: list = field(default_factory=list)  # what they reported (chunk_result)
     shared: list | None = None  # keyframes to link from the slower render once it is done (None: none waiting)
+    deferred: set = field(default_factory=set)  # those keyframes: outside the bar's total until their chunk is done
 
 
 def _submit_chunks(queue, ex, r: RenderTask, plan: dict, indices: list[int]) -> int:

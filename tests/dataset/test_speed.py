@@ -5,6 +5,7 @@ and whose measured image motion is stated in its attributes."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import h5py
@@ -155,13 +156,14 @@ def test_factor_past_coverage_refused_naming_sequence_and_coverage(tmp_path, sim
 
 
 @pytest.mark.slow
-def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_path):
+def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_path, capsys):
     k = 4.0
     spec = load_spec(_spec(tmp_path, f"speed = [1, {k:g}]", duration_s=0.004, resolution=(24, 18),
                            sensors='[sensors.frames]\npreset = "blackfly_s"\nframe_rate_hz = 1000.0\n'
                                    'exposure_s = 0.0005'))
-    result = generate(spec, tmp_path / "out", ExecutorConfig(workers=1), progress=False,
+    result = generate(spec, tmp_path / "out", ExecutorConfig(workers=1), progress=True,
                       created_utc="2025-01-01T00:00:00Z")
+    progress_text = capsys.readouterr().err
     base = load_trajectory(TRAJECTORIES_DIR / "office.toml")
     measured = {}
     for speed, name in ((1.0, "office_10lx.h5"), (k, f"office_x{k:g}_10lx.h5")):
@@ -214,6 +216,12 @@ def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_p
     assert [n for _, n in est.keyframe_s] == [rendered[r.rel_dir] - shared[r.rel_dir] for r in renders]
     assert est.n_shared_keyframes == sum(shared.values()) > 0
     assert rendered[renders[3].rel_dir] > 2 * rendered[renders[2].rel_dir]  # fan ×4 against fan ×1
+    # The keyframe bar's total counts what is rendered (one worker: every plan is made before any keyframe, so
+    # the slower renders are still running then); the shared keyframes join it as they are linked.
+    totals = [int(t) for t in re.findall(r"keyframes:[^\r\n]*?\d+/(\d+)", progress_text)]
+    n_all = sum(len(t["keyframes"]) for t in timelines.values())
+    assert sum(rendered.values()) - sum(shared.values()) in totals
+    assert totals == sorted(totals) and totals[-1] == n_all
 
     # Without the slower render's files (deleted; its recordings stay complete, so it is not rendered again) the
     # faster render renders its shared keyframes itself, on 2 workers: the same bytes as the linked files.
