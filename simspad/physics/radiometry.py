@@ -108,12 +108,22 @@ def luminance_from_rgb(rgb: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray [...]
-        float32 luminance in the units of ``rgb``.
+        float32 luminance in the units of ``rgb``: ``(R·w_R + G·w_G) + B·w_B``, each operation rounded to
+        float32, so every machine gives the same bits.
     """
     rgb = np.asarray(rgb)
     if rgb.shape[-1] != 3:
         raise ValueError(f"expected a last axis of 3 (R, G, B), got shape {rgb.shape}")
-    return (rgb.astype(np.float32, copy=False) @ _rgb_to_y_weights()).astype(np.float32, copy=False)
+    rgb = rgb.astype(np.float32, copy=False)
+    w_r, w_g, w_b = _rgb_to_y_weights()
+    # Element-wise products and sums, not a matrix product: NumPy hands `@` to BLAS, whose kernel (chosen for the
+    # CPU at run time) sets the summation order and whether it fuses multiply-adds. An AVX-512 and an AVX2 machine
+    # then differ in the last bit of ~20 % of the pixels, and with them every SPAD bit, event and ground-truth
+    # value downstream: one spec and seed would give different recordings on different workers of a cluster.
+    y = rgb[..., 0] * w_r
+    y += rgb[..., 1] * w_g
+    y += rgb[..., 2] * w_b
+    return y
 
 
 def luminance_scale(mean_relative_luminance: float, lux: float, optics: Optics | None = None) -> float:
