@@ -124,15 +124,23 @@ def read_exr_info(path: str | Path) -> ExrInfo:
                    depth_channel=depth)
 
 
-def read_exr(path: str | Path) -> dict[str, np.ndarray]:
+def read_exr(path: str | Path, *, rgb_planes: bool = False) -> dict[str, np.ndarray]:
     """Read an EXR keyframe as float32 arrays.
+
+    Parameters
+    ----------
+    path : str or Path
+    rgb_planes : bool
+        Return R, G and B as the planes ``"r"``, ``"g"``, ``"b"`` the file holds instead of interleaving them
+        into ``"rgb"`` (a copy of the whole image that a reader of luminance alone does not need).
 
     Returns
     -------
     dict
-        ``"rgb"``: [H, W, 3] linear radiance (present if the file has R,G,B), ``"y"``: [H, W] (present if it
-        has only Y), ``"z"``: [H, W] depth in scene units (m) if the file has a depth channel, ``"object_id"``:
-        [H, W] per-pixel object id if the file has :data:`OBJECT_ID_CHANNEL`.
+        ``"rgb"``: [H, W, 3] linear radiance (present if the file has R,G,B; or ``"r"``, ``"g"``, ``"b"``,
+        [H, W] each, with ``rgb_planes``), ``"y"``: [H, W] (present if it has only Y), ``"z"``: [H, W] depth in
+        scene units (m) if the file has a depth channel, ``"object_id"``: [H, W] per-pixel object id if the file
+        has :data:`OBJECT_ID_CHANNEL`.
     """
     path = Path(path)
     error = None
@@ -147,7 +155,11 @@ def read_exr(path: str | Path) -> dict[str, np.ndarray]:
     radiance, depth = _classify(path, tuple(channels))
     out: dict[str, np.ndarray] = {}
     if radiance == "rgb":
-        out["rgb"] = np.stack([channels[c].astype(np.float32, copy=False) for c in RGB_CHANNELS], axis=-1)
+        planes = [channels[c].astype(np.float32, copy=False) for c in RGB_CHANNELS]
+        if rgb_planes:
+            out.update(zip("rgb", planes))
+        else:
+            out["rgb"] = np.stack(planes, axis=-1)
     else:
         out["y"] = channels[LUMINANCE_CHANNEL].astype(np.float32, copy=False)
     if depth is not None:

@@ -142,8 +142,9 @@ def read_render_dir(render_dir: str | Path) -> RenderDirIndex:
                           np.stack(poses) if poses else None, has_depth)
 
 
-def read_keyframe(file: Path, width: int, height: int) -> dict[str, np.ndarray]:
-    """Pixels of one keyframe EXR as :func:`simspad.io.exr.read_exr` returns them (``rgb`` or ``y``, ``z``).
+def read_keyframe(file: Path, width: int, height: int, *, rgb_planes: bool = False) -> dict[str, np.ndarray]:
+    """Pixels of one keyframe EXR as :func:`simspad.io.exr.read_exr` returns them (``rgb`` or ``y``, ``z``; with
+    ``rgb_planes``, ``r``, ``g``, ``b`` instead of ``rgb``).
 
     Raises
     ------
@@ -151,14 +152,16 @@ def read_keyframe(file: Path, width: int, height: int) -> dict[str, np.ndarray]:
         The frame's size differs from ``width`` x ``height``, its radiance is NaN, infinite or negative, or its
         depth is NaN or negative.
     """
-    data = read_exr(file)
-    radiance = data.get("rgb", data.get("y"))
-    if radiance.shape[:2] != (height, width):
-        raise InputError(f"size {radiance.shape[1]}x{radiance.shape[0]} differs from timeline.json's "
+    data = read_exr(file, rgb_planes=rgb_planes)
+    radiance = [data[k] for k in ("rgb", "r", "g", "b", "y") if k in data]
+    if radiance[0].shape[:2] != (height, width):
+        raise InputError(f"size {radiance[0].shape[1]}x{radiance[0].shape[0]} differs from timeline.json's "
                          f"{width}x{height}", path=file, field="dataWindow")
-    _check_radiance(radiance, file, "R,G,B" if "rgb" in data else "Y")
+    for values in radiance:
+        _check_radiance(values, file, "Y" if "y" in data else "R,G,B")
     depth = data.get("z")
-    if depth is not None and (np.isnan(depth).any() or (depth < 0).any()):
+    # min ≥ 0 is False for a NaN as for a negative value: two reductions pass a good frame, the search runs after
+    if depth is not None and not np.min(depth) >= 0 and (np.isnan(depth).any() or (depth < 0).any()):
         row, col = np.argwhere(np.isnan(depth) | (depth < 0))[0][:2]
         raise InputError(f"depth {depth[row, col]} at pixel (row {row}, col {col}) (expected ≥ 0 metres; 0 where "
                          "no surface)", path=file, field="Z")
@@ -173,6 +176,8 @@ def _positive_int(meta: dict, key: str, path: Path) -> int:
 
 
 def _check_radiance(radiance: np.ndarray, file: Path, channels: str) -> None:
+    if np.min(radiance) >= 0 and np.max(radiance) < np.inf:  # False for any NaN: finite and ≥ 0 everywhere
+        return
     bad = ~np.isfinite(radiance)
     if bad.any():
         row, col = np.argwhere(bad)[0][:2]

@@ -115,14 +115,19 @@ def luminance_from_rgb(rgb: np.ndarray) -> np.ndarray:
     if rgb.shape[-1] != 3:
         raise ValueError(f"expected a last axis of 3 (R, G, B), got shape {rgb.shape}")
     rgb = rgb.astype(np.float32, copy=False)
+    return luminance_from_planes(rgb[..., 0], rgb[..., 1], rgb[..., 2])
+
+
+def luminance_from_planes(r: np.ndarray, g: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`luminance_from_rgb` of the separate float32 planes ``r``, ``g``, ``b`` (the same bits)."""
     w_r, w_g, w_b = _rgb_to_y_weights()
     # Element-wise products and sums, not a matrix product: NumPy hands `@` to BLAS, whose kernel (chosen for the
     # CPU at run time) sets the summation order and whether it fuses multiply-adds. An AVX-512 and an AVX2 machine
     # then differ in the last bit of ~20 % of the pixels, and with them every SPAD bit, event and ground-truth
     # value downstream: one spec and seed would give different recordings on different workers of a cluster.
-    y = rgb[..., 0] * w_r
-    y += rgb[..., 1] * w_g
-    y += rgb[..., 2] * w_b
+    y = np.multiply(r, w_r, dtype=np.float32)
+    y += np.multiply(g, w_g, dtype=np.float32)
+    y += np.multiply(b, w_b, dtype=np.float32)
     return y
 
 

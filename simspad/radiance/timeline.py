@@ -19,7 +19,7 @@ import numpy as np
 
 from simspad.errors import InputError
 from simspad.io.render_dir import read_keyframe, read_render_dir
-from simspad.physics.radiometry import Optics, flux_scale, luminance_from_rgb
+from simspad.physics.radiometry import Optics, flux_scale, luminance_from_planes, luminance_from_rgb
 
 #: Instants this close outside [t_start, t_end] (seconds) are clamped, so bin edges computed as
 #: t0 + n·bin_s do not fail on round-off.
@@ -152,10 +152,14 @@ class Timeline:
         index = read_render_dir(render_dir)
 
         def load(i: int) -> dict:
-            data = read_keyframe(index.files[i], index.width, index.height)
-            frame = {"y": luminance_from_rgb(data["rgb"]) if "rgb" in data else data["y"]}
-            if "rgb" in data:
-                frame["rgb"] = data["rgb"]
+            # R, G, B kept as the file's planes: luminance is computed from them, and only the frame camera's
+            # rgb_keyframe interleaves them
+            data = read_keyframe(index.files[i], index.width, index.height, rgb_planes=True)
+            if "y" in data:
+                frame = {"y": data["y"]}
+            else:
+                frame = {"y": luminance_from_planes(data["r"], data["g"], data["b"]),
+                         **{k: data[k] for k in "rgb"}}
             if index.has_depth:
                 frame["z"] = data["z"]
             return frame
@@ -208,10 +212,14 @@ class Timeline:
     def rgb_keyframe(self, i: int) -> np.ndarray:
         """Linear sRGB of keyframe ``i`` × scale, [H, W, 3] float32 (luminance repeated for Y-only frames)."""
         frame = self._cache.get(self._index(i))
-        rgb = frame.get("rgb")
-        if rgb is None:
-            rgb = np.repeat(frame["y"][..., None], 3, axis=-1)
-        return rgb * np.float32(self.scale)
+        scale = np.float32(self.scale)
+        if "rgb" in frame:
+            return frame["rgb"] * scale
+        planes = [frame[k] for k in "rgb"] if "r" in frame else [frame["y"]] * 3
+        out = np.empty(planes[0].shape + (3,), np.float32)
+        for c, plane in enumerate(planes):
+            np.multiply(plane, scale, out=out[..., c])
+        return out
 
     def keyframe_depth(self, i: int) -> np.ndarray | None:
         """Depth of keyframe ``i`` in metres, [H, W] float32, or None."""
