@@ -11,7 +11,9 @@ spec's sizes.
 - **Simulation time**: one throughput probe of the spec's sensors on a small render (ground truth, SPAD, frames,
   events), measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by
   Gbit of SPAD data, megapixel-frames and megapixel-seconds; plus a per-recording fixed part (the all-sensor
-  probe minus its units at the marginal costs).
+  probe minus its units at the marginal costs). The probe's pixels are repeated up to 4 × 4 towards the spec's
+  width (:data:`PROBE_MAX_UPSAMPLE`): costs per row, per kernel call and per keyframe then weigh per pixel as
+  they do at full size (64 × 48 px put them at 3–6× the cost per pixel of 256² and 512² recordings).
 - **Disk**: the probe files' bytes per unit (the same marginal fit, so compression counts) and per recording;
   renders from the calibration EXRs' bytes per pixel.
 - **Peak memory** per worker: the kernel's peak-RSS counter (``VmHWM``, reset through ``/proc/self/clear_refs``)
@@ -24,6 +26,7 @@ the figures of one spec.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import shutil
@@ -42,7 +45,9 @@ from simspad.dataset.executors import (
     plan_render_task,
 )
 from simspad.dataset.plan import make_plan
+from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write_exr
 from simspad.io.recording import open_recording
+from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import chunk_size_for
@@ -69,6 +74,9 @@ CALIBRATION_SPAN_S = 0.02
 #: the process's CPU time and came out as ≈ 0 in one estimate of five.
 PROBE_SIZE_PX = (64, 48)
 PROBE_DURATIONS_S = (0.01, 0.05)
+#: Largest factor the probe render's pixels are repeated by (each way) towards the spec's widest sequence: 4 gives
+#: 256 × 192 px, where the simulators' costs per pixel are within ~10 % of 512 × 512's, for ~10 s more probing.
+PROBE_MAX_UPSAMPLE = 4
 MIB = 1024**2
 
 
@@ -145,6 +153,7 @@ class UnitCosts:
     recording_fixed_bytes: float = 0.0
     sim_rss_bytes_per_mp: float | None = None  # peak-RSS growth of a simulation with its pixel count
     sim_process_rss_bytes: int | None = None  # peak RSS of the probing process (imports, numba, buffers)
+    sim_probe_px: tuple[int, int] | None = None  # (width, height) the simulations were probed at
     calibration_s: float = 0.0
 
 
@@ -194,10 +203,16 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
     """Marginal simulation costs of the spec's sensors on a small render of ``seq``."""
 
     w, h = PROBE_SIZE_PX
-    mp = w * h / 1e6
     half, full = PROBE_DURATIONS_S
     rdir = tmp / "probe-render"
     render_sequence(seq.scene, seq.trajectory, _settings(seq, (w, h), full, 4), out_dir=rdir, progress=False)
+    widest = max(s.resolution[0] for s in spec.sequences)
+    factor = int(np.clip(round(widest / w), 1, PROBE_MAX_UPSAMPLE))
+    if factor > 1:
+        rdir = upsample_render_dir(rdir, tmp / "probe-render-upsampled", factor)
+        w, h = w * factor, h * factor
+    mp = w * h / 1e6
+    costs.sim_probe_px = (w, h)
     params = {k: s.params for k, s in spec.sensors.items()}
     lux = float(np.median(spec.lux))
     gt_rate_hz = spec.evaluation.rate_hz
@@ -258,6 +273,20 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
         costs.sim_s_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
     costs.recording_fixed_bytes = max(p_all.stat().st_size - costs.bytes_per["gt"] * gt_full - sum(
         costs.bytes_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
+
+
+def upsample_render_dir(src: Path, dst: Path, factor: int) -> Path:
+    """A copy of render directory ``src`` in ``dst`` with every pixel of every channel repeated ``factor`` ×
+    ``factor`` times (same instants, poses and metadata): a larger render of the same content, for timing."""
+    meta = json.loads((Path(src) / TIMELINE_FILE).read_text())
+    names = {"r": "R", "g": "G", "b": "B", "y": LUMINANCE_CHANNEL, "z": "Z", "object_id": OBJECT_ID_CHANNEL}
+    for kf in meta["keyframes"]:
+        data = read_exr(Path(src) / kf["file"], rgb_planes=True)
+        write_exr(Path(dst) / kf["file"], {names[k]: np.repeat(np.repeat(a, factor, 0), factor, 1)
+                                           for k, a in data.items()})
+    meta.update(width=meta["width"] * factor, height=meta["height"] * factor)
+    write_timeline_json(dst, **meta)
+    return Path(dst)
 
 
 def _gt_stored_frames(path: Path) -> int:
@@ -453,7 +482,8 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
         for name, c in costs.render.items()))
     sim = [f"{k} {v:.3g} s/" + {"spad": "Gbit", "frames": "MP·frame", "events": "MP·s"}[k]
            for k, v in costs.sim_s_per.items()]
-    lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]))
+    probed = f" (probed at {costs.sim_probe_px[0]}×{costs.sim_probe_px[1]} px)" if costs.sim_probe_px else ""
+    lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]) + probed)
     return "\n".join(lines)
 
 
