@@ -231,7 +231,9 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
         t_all, p_all = run(list(params), full)
     if peak.bytes is not None:
         costs.sim_rss_bytes_per_mp = peak.bytes / mp
-    costs.sim_process_rss_bytes = _vm_hwm_bytes()
+    # the process before the probe (imports, numba, what the calibration renders left): the probe's own growth is
+    # the per-pixel part above, and the high-water mark after it would count that growth twice
+    costs.sim_process_rss_bytes = peak.base if peak.base is not None else _vm_hwm_bytes()
     gt = [run([], d) for d in (half, full)]
     gt_marginal = max(gt[1][0] - gt[0][0], 0.0)
     gt_bytes = gt[1][1].stat().st_size - gt[0][1].stat().st_size
