@@ -160,7 +160,7 @@ def read_keyframe(file: Path, width: int, height: int, *, rgb_planes: bool = Fal
     for values in radiance:
         _check_radiance(values, file, "Y" if "y" in data else "R,G,B")
     depth = data.get("z")
-    # min ≥ 0 is False for a NaN as for a negative value: two reductions pass a good frame, the search runs after
+    # min ≥ 0 is False for a NaN as for a negative value: one reduction passes a good frame, the search runs after
     if depth is not None and not np.min(depth) >= 0 and (np.isnan(depth).any() or (depth < 0).any()):
         row, col = np.argwhere(np.isnan(depth) | (depth < 0))[0][:2]
         raise InputError(f"depth {depth[row, col]} at pixel (row {row}, col {col}) (expected ≥ 0 metres; 0 where "
