@@ -218,10 +218,12 @@ def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_p
     assert rendered[renders[3].rel_dir] > 2 * rendered[renders[2].rel_dir]  # fan ×4 against fan ×1
     # The keyframe bar's total counts what is rendered (one worker: every plan is made before any keyframe, so
     # the slower renders are still running then); the shared keyframes join it as they are linked.
-    totals = [int(t) for t in re.findall(r"keyframes:[^\r\n]*?\d+/(\d+)", progress_text)]
+    shown = [(int(n), int(t)) for n, t in re.findall(r"keyframes:[^\r\n]*?(\d+)/(\d+)", progress_text)]
+    totals = [t for _, t in shown]
     n_all = sum(len(t["keyframes"]) for t in timelines.values())
     assert sum(rendered.values()) - sum(shared.values()) in totals
-    assert totals == sorted(totals) and totals[-1] == n_all
+    assert totals == sorted(totals) and shown[-1] == (n_all, n_all)
+    assert all(n <= t for n, t in shown)
 
     # Without the slower render's files (deleted; its recordings stay complete, so it is not rendered again) the
     # faster render renders its shared keyframes itself, on 2 workers: the same bytes as the linked files.
