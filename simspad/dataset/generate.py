@@ -27,6 +27,7 @@ killed run are removed on the next run (the lock guarantees no one else is writi
 
 from __future__ import annotations
 
+import os
 import shutil
 import sys
 import time
@@ -302,6 +303,17 @@ def show_written_keyframes(out_dir: Path, running, chunked: dict, partial: dict,
     (job -> keyframes counted) is updated; a faster speed's keyframes linked from a slower render are left to
     their chunk's end, when they join the bar's total.
     """
+    listed: dict[Path, set] = {}  # one directory listing per folder and poll, not a stat per keyframe (cluster
+    # file systems serve metadata slowly: 256 workers' chunks would be ~16 000 stats a second)
+
+    def files_in(folder: Path) -> set:
+        if folder not in listed:
+            try:
+                listed[folder] = set(os.listdir(folder))
+            except OSError:  # not created yet
+                listed[folder] = set()
+        return listed[folder]
+
     for job in list(running):
         if job.kind != "chunk":
             continue
@@ -310,7 +322,7 @@ def show_written_keyframes(out_dir: Path, running, chunked: dict, partial: dict,
         if not c or state is None or not state.names or state.deferred.intersection(c):
             continue
         folder = out_dir / r.rel_dir
-        written = sum((folder / state.names[i]).is_file() for i in c)
+        written = sum((folder / state.names[i]).name in files_in((folder / state.names[i]).parent) for i in c)
         if written != partial.get(job, 0):
             bar.update(written - partial.get(job, 0))
             partial[job] = written
