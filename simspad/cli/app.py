@@ -220,7 +220,7 @@ def export(recording, fmt, out_path, packing, frames_format):
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit."""
     with first_sigint_only() as sigint:  # a second Ctrl-C must not break into the clean-up of the first
-        code = _main(argv)
+        code = _main(argv, sigint)
     if sigint.interrupted and code != 130:  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
         click.echo("simspad: interrupted", err=True)
         code = 130
@@ -247,7 +247,9 @@ def _internal_error(exc: BaseException) -> int:
     return 1
 
 
-def _main(argv: list[str] | None) -> int:
+def _main(argv: list[str] | None, sigint=None) -> int:
+    """Run the CLI; ``sigint`` (:class:`~simspad.cli.interrupt.SigintState`) is marked when a KeyboardInterrupt ends
+    the command, whether or not this process's own handler raised it."""
     try:
         cli.main(args=argv, standalone_mode=False)
     except SimSpadError as exc:
@@ -258,12 +260,16 @@ def _main(argv: list[str] | None) -> int:
     except click.exceptions.Abort as exc:
         # click turns Ctrl-C (KeyboardInterrupt) into Abort; a declined prompt is an Abort of its own
         interrupted = isinstance(exc.__cause__, KeyboardInterrupt)
+        if interrupted and sigint is not None:
+            sigint.interrupted = True
         click.echo(f"simspad: {'interrupted' if interrupted else 'aborted'}", err=True)
         return 130
     except click.ClickException as exc:
         exc.show()
         return exc.exit_code
     except KeyboardInterrupt:
+        if sigint is not None:
+            sigint.interrupted = True
         click.echo("simspad: interrupted", err=True)
         return 130
     except OSError as exc:

@@ -51,7 +51,16 @@ def first_sigint_only() -> Iterator[SigintState]:
     signal.signal(signal.SIGINT, on_sigint)
     try:
         yield state
+    except KeyboardInterrupt:
+        state.interrupted = True
+        raise
     finally:
         sys.unraisablehook = previous_hook
-        if not state.interrupted:
+        if state.interrupted:
+            # However the interrupt arrived (also a KeyboardInterrupt that did not come through this handler, which
+            # used to put the previous handler back), SIGINT stays ignored to the end. With Python's own handler put
+            # back, a second press while the interpreter exits (joining threads and pools) raises there, and Python
+            # ends an exit interrupted that way by SIGINT: status −2 after the one line, not 130.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        else:
             signal.signal(signal.SIGINT, previous)

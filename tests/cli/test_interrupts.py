@@ -67,3 +67,27 @@ def test_double_ctrl_c_is_one_line(command, gap_s, tmp_path, simspad_cli, long_e
     assert lines[-1] == "simspad: interrupted", proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr and "Error" not in proc.stderr, proc.stderr[-3000:]
     assert "resource_tracker" not in proc.stderr and "leaked" not in proc.stderr, proc.stderr[-3000:]
+
+
+_KEYBOARD_INTERRUPT_FROM_A_TASK = r"""
+import signal, sys
+import simspad.cli.app as app
+
+def run(**kwargs):  # the command ends with a KeyboardInterrupt that this process's handler did not raise
+    raise KeyboardInterrupt
+
+app.cli.main = run
+code = app.main(["generate", "mini"])
+print(code, signal.getsignal(signal.SIGINT) is signal.SIG_IGN)
+"""
+
+
+def test_interrupt_from_anywhere_leaves_sigint_ignored_to_the_end(child_env):
+    """Whatever raised the KeyboardInterrupt, SIGINT stays ignored while the process exits. With Python's own
+    handler put back, a second press during the exit (joining threads and pools) raised there, and Python ended
+    the process by SIGINT after its one line: status −2, seen once in `test_double_ctrl_c_is_one_line`."""
+    done = subprocess.run([os.sys.executable, "-c", _KEYBOARD_INTERRUPT_FROM_A_TASK], capture_output=True,
+                          text=True, env=child_env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["130", "True"]
+    assert done.stderr.strip().splitlines() == ["simspad: interrupted"]
