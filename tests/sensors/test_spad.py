@@ -236,17 +236,17 @@ def test_time_varying_ramp_integrates_exactly(peak_lambda, shape):
 
 
 def test_tabulated_sparse_rows_follow_ramps_inside_long_runs():
-    """Keyframes 1.7 ms apart (≈ 166 bins per run): Λ ramps 0.02 → 0.07 → 0.025, every byte sparse (8·0.07 below
+    """Keyframes 1.7 ms apart (≈ 166 bins per run): Λ ramps 0.017 → 0.036 → 0.02, every byte sparse (8·0.036 below
     ``DENSE_MIN_CANDIDATES``) and every row tabulated (its candidates outnumber its runs × pixels), so thinning
     takes the exact Λ_k from the per-row table of each run's a + b·dk. Per-bin counts follow Binomial(N, p_k)
     (χ²); taking Λ constant over each call (the table's b ignored) is rejected by the same bound."""
     from simspad.sensors.spad.kernel import _TABLE_MIN_RUN_BINS, DENSE_MIN_CANDIDATES
 
-    shape, n, chunk = (96, 64), 2500, 500
+    shape, n, chunk = (192, 64), 2500, 500
     p = SpadParams(gate_s=BIN_S, **QUIET)
     q = p.detection_area_m2
     knots_t = np.array([0.0, 1.7e-3, 3.4e-3, 5.1e-3, 6.8e-3, 8.5e-3, 10.2e-3, 30e-3])
-    knots_lam = np.array([0.02, 0.07, 0.025, 0.06, 0.02, 0.07, 0.03, 0.03])
+    knots_lam = np.array([0.017, 0.036, 0.02, 0.033, 0.017, 0.036, 0.025, 0.025])
     assert 8 * knots_lam.max() < DENSE_MIN_CANDIDATES  # sparse everywhere
     runs_per_call = 2 * (chunk * BIN_S / 1.7e-3 + 1)  # a run per piece and one per straddling gate
     assert runs_per_call * _TABLE_MIN_RUN_BINS <= chunk  # the call's runs are long enough to tabulate

@@ -30,13 +30,17 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
   per-block fall-back to slices), while the bytes where it would win (P(1) ≲ 0.03) go to the sparse sampler.
 
 Where the time goes, per call of 512 bins of the scene of benchmarks/bench_spad.py (the kernel with parts
-removed, in one process): at mean P(1) = 0.05 of ≈ 200 ms, ≈ 12 fixed, ≈ 70 dense (20 % of the bytes), ≈ 60
-drawing the sparse candidates (≈ 4.5 M) and ≈ 60 thinning them; at 0.001 of ≈ 14 ms, ≈ 2.5 fixed, ≈ 4 storing
-the block (16 MB to memory), ≈ 4 drawing and ≈ 4 thinning. Tried against this kernel with the same bytes and no
+removed, in one process; an AMD EPYC with AVX-512): every byte dense, ≈ 75 ms at any mean P(1), of which ≈ 38
+drawing and comparing (:func:`~simspad.sensors.spad.dense_bits.dense_bits`), ≈ 13 advancing z by its per-bin
+factor and ≈ 24 the rest (each run's set-up, the row bounds, storing the block); with the sampler chosen per
+byte, ≈ 80 ms at 0.05 and ≈ 10 at 0.001. Measured earlier on another machine, at 0.001: ≈ 2.5 fixed, ≈ 4
+storing the block (16 MB to memory), ≈ 4 drawing and ≈ 4 thinning. Tried against this kernel with the same bytes and no
 gain beyond the ± 5–10 % between alternating calls: thinning without branches (the exact Λ_k for every
 candidate: 1.14–1.2× slower), per-run bounds of Λ for the squeeze, candidates drawn in batches (in a function of their
 own) before thinning, a padded block (no cache-set aliasing between bins), and the dense set-up of each run
-computed for the dense bytes only instead of the whole row.
+computed for the dense bytes only instead of the whole row; and, for the dense sampler, advancing z inside
+:func:`~simspad.sensors.spad.dense_bits.dense_bits` (into a second buffer, so that ties still see the old z): its
+loop then no longer vectorises, 5–8× slower.
 
 Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
 (in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
@@ -67,9 +71,14 @@ from simspad.sensors.spad.dense_bits import M16, dense_bits
 
 #: Per-byte choice of sampler: a byte whose expected sparse candidates per bin reach this uses the dense sampler
 #: (whose cost does not depend on the rates), in rows that have :data:`DENSE_MIN_BYTES` such bytes. Measured with
-#: the kernel alone on the scene of benchmarks/bench_spad.py (CPU ms per 465 bins of 512×512, thresholds
-#: 0.3 / 0.6 with 16 bytes): 15.7 / 14.0 at mean P(1) = 0.001, 73 / 43 at 0.01, ≈ 150 either way at 0.05 and 0.1.
-DENSE_MIN_CANDIDATES = 0.6
+#: the kernel alone on the scene of benchmarks/bench_spad.py (CPU ms per 512 bins of 512×512, median of 4,
+#: thresholds 0.6 / 0.4 / 0.3 / 0.2 with 16 bytes, an AMD EPYC with AVX-512): 10.0 / 10.3 / 10.1 / 10.2 at mean
+#: P(1) = 0.001, 32.1 / 32.1 / 32.5 / 31.7 at 0.01, 97.5 / 87.7 / 79.4 / 78.9 at 0.05, 105 / 98 / 92 / 89 at 0.1,
+#: 165 / 163 / 155 / 154 at 0.9 (8 or 32 bytes instead of 16: no better). The dense sampler alone costs ≈ 75 ms
+#: whatever the rates. An earlier kernel, whose dense loop was not vectorised, measured 0.6 best. The choice
+#: fixes which random numbers make which bits, so it is a constant, never tuned at run time: the same spec
+#: gives the same bits on every machine.
+DENSE_MIN_CANDIDATES = 0.3
 #: Dense bytes a row needs before any of its bytes uses the dense sampler (or all of the row's bytes, if fewer):
 #: the dense loop costs per bin of the row whatever its number of bytes, and a sparse sampler per candidate.
 DENSE_MIN_BYTES = 16
