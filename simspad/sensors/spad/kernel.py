@@ -74,7 +74,8 @@ from simspad.sensors.spad.dense_bits import M16, dense_bits
 #: the kernel alone on the scene of benchmarks/bench_spad.py (CPU ms per 512 bins of 512×512, median of 4,
 #: thresholds 0.6 / 0.4 / 0.3 / 0.2 with 16 bytes, an AMD EPYC with AVX-512): 10.0 / 10.3 / 10.1 / 10.2 at mean
 #: P(1) = 0.001, 32.1 / 32.1 / 32.5 / 31.7 at 0.01, 97.5 / 87.7 / 79.4 / 78.9 at 0.05, 105 / 98 / 92 / 89 at 0.1,
-#: 165 / 163 / 155 / 154 at 0.9 (8 or 32 bytes instead of 16: no better). The dense sampler alone costs ≈ 75 ms
+#: 165 / 163 / 155 / 154 at 0.9 (8 or 32 bytes instead of 16: no better; the same ranking with numba compiling
+#: for AVX2, ``NUMBA_CPU_NAME=haswell``: 95.8 / 85.8 / 80.2 / 78.1 at 0.05). The dense sampler alone costs ≈ 75 ms
 #: whatever the rates. An earlier kernel, whose dense loop was not vectorised, measured 0.6 best. The choice
 #: fixes which random numbers make which bits, so it is a constant, never tuned at run time: the same spec
 #: gives the same bits on every machine.
