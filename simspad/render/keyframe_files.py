@@ -31,6 +31,11 @@ def make_out_dir(out_dir: Path) -> list[Path]:
             continue
         try:
             d.mkdir()
+        except FileExistsError:  # another process (a chunk of the same render) created it since the check
+            if d.is_dir():
+                continue
+            remove_created(created)
+            raise SimSpadError(f"{d} is a file, not a directory", path=out_dir, field="out") from None
         except OSError as exc:
             remove_created(created)
             raise SimSpadError(f"cannot create the output directory ({exc.strerror})", path=out_dir,
