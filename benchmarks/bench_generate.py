@@ -63,21 +63,28 @@ def _subset(spec, n_seq: int, n_lux: int):
 
 
 def naive_generate(spec, out: Path) -> float:
-    """Reference: one process, one thing at a time, no pool, no manifest, no resume."""
+    """Reference: one process, one thing at a time: render each sequence's keyframes, then simulate each
+    recording; no pool, no manifest, no resume, no keyframes linked between speeds (a faster speed renders its
+    share of the slower one's poses again). Each render follows the executor's plan of its task (trajectory
+    retimed by the speed factor, seed, settings, keyframe instants), so both write the same keyframes (checked
+    byte for byte by :func:`same_keyframes`)."""
     for k, v in job_environment().items():
         os.environ.setdefault(k, v)
-    from simspad.render.renderer import RenderSettings, render_sequence, select_variant
+    from simspad.dataset.executors import plan_render_task
+    from simspad.dataset.speed import sequence_trajectories
+    from simspad.render.renderer import finalize_render, render_keyframes, select_variant
     from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
     t0 = time.perf_counter()
     select_variant()
     plan = make_plan(spec, "2025-01-01T00:00:00Z")
-    for r in plan.renders:
+    planned = {}
+    for r in plan.renders:  # slower speeds first: a faster render's plan starts with its prefix's
         s = r.sequence
-        render_sequence(s.scene, s.trajectory, RenderSettings(duration_s=s.duration_s, start_s=s.start_s,
-                                                              resolution=s.resolution, spp=s.spp,
-                                                              max_flow_px=s.max_flow_px, min_rate_hz=s.min_rate_hz,
-                                                              seed=r.seed), out_dir=out / r.rel_dir, progress=False)
+        render_plan = planned[r.rel_dir] = plan_render_task(r, planned)
+        render_keyframes(s.scene, sequence_trajectories(s.scene, s.trajectory, r.speed_factor), render_plan,
+                         range(render_plan.n_keyframes), out_dir=out / r.rel_dir)
+        finalize_render(render_plan, out / r.rel_dir)
     for t in plan.recordings:
         settings = RecordingSettings(lux=t.lux, sensors=dict(t.sensors), start_s=t.start_s, duration_s=t.duration_s,
                                      seed=t.seed, stream_key=t.stream_key, gt_rate_hz=t.gt_rate_hz, optics=t.optics)
@@ -86,20 +93,35 @@ def naive_generate(spec, out: Path) -> float:
     return time.perf_counter() - t0
 
 
+def same_keyframes(a: Path, b: Path) -> tuple[int, int]:
+    """(keyframe files with the same name and bytes under both dataset directories, keyframe files in ``a``)."""
+    files = sorted(p.relative_to(a) for p in (a / "renders").rglob("*.exr"))
+    same = sum((b / f).is_file() and (a / f).read_bytes() == (b / f).read_bytes() for f in files)
+    return same, len(files)
+
+
 def part_ratio(spec, tmp: Path, executor_wall_s: float | None, subset: bool) -> None:
-    """The naive loop on the same spec the executor ran (part 2), or both on a 2×2 subset."""
+    """The naive loop on the same spec the executor ran (part 2, into ``tmp/mini``), or both on a 2×2 subset."""
+    executor_out = tmp / "mini"
     if subset or executor_wall_s is None:
         spec = _subset(spec, 2, 2)
     n = len(spec.sequences) * len(spec.lux)
     print(f"\n[2] executor vs naive loop: {len(spec.sequences)} sequences × {len(spec.lux)} lux = {n} recordings")
     if subset or executor_wall_s is None:
+        executor_out = tmp / "executor"
         t0 = time.perf_counter()
-        generate(spec, tmp / "executor", executor=ExecutorConfig("local"), progress=False, created_utc="2025-01-01T00:00:00Z")
+        generate(spec, executor_out, executor=ExecutorConfig("local"), progress=False,
+                 created_utc="2025-01-01T00:00:00Z")
         executor_wall_s = time.perf_counter() - t0
     t_naive = naive_generate(spec, tmp / "naive")
+    same, total = same_keyframes(tmp / "naive", executor_out)
     print(f"    naive in-process loop        {t_naive:8.1f} s")
     print(f"    local executor ({default_workers()} cores)     {executor_wall_s:8.1f} s")
     print(f"    ratio naive / executor       {t_naive / executor_wall_s:8.2f}×")
+    print(f"    keyframes                    {same} of the naive loop's {total} identical in the executor's renders")
+    if same != total:
+        raise RuntimeError("the naive loop and the executor rendered different keyframes: the ratio compares "
+                           "different work")
 
 
 def part_mini(spec, tmp: Path) -> Path:
