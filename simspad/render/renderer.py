@@ -234,14 +234,14 @@ def link_shared_keyframes(plan: RenderPlan, indices, prefix_dir, out_dir) -> int
     source is missing or damaged are left to :func:`render_keyframes`, which renders the same pixels (same pose,
     seed and settings). Returns how many were linked or copied."""
     out_dir, prefix_dir = Path(out_dir), Path(prefix_dir)
+    shared = [i for i in indices if i < plan.n_shared]
+    if shared:
+        make_out_dir(out_dir)  # the render directory and its frames/ (a keyframe's name includes frames/)
     n = 0
-    for i in indices:
-        if i >= plan.n_shared:
-            continue
+    for i in shared:
         src, dst = prefix_dir / plan.names[i], out_dir / plan.names[i]
         if dst.is_file() or not src.is_file() or not frame_is_intact(src):
             continue
-        make_out_dir(dst.parent)
         try:
             os.link(src, dst)
         except FileExistsError:
