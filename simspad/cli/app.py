@@ -218,8 +218,14 @@ def export(recording, fmt, out_path, packing, frames_format):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit."""
-    with first_sigint_only() as sigint:  # a second Ctrl-C must not break into the clean-up of the first
+    """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit.
+
+    Without ``argv`` (the ``simspad`` program: its arguments are ``sys.argv``) the process exits next, and a Ctrl-C
+    from the end of the command on is ignored (:func:`~simspad.cli.interrupt.first_sigint_only`); with ``argv``
+    (a caller inside its own process) the caller's SIGINT handler is put back.
+    """
+    # a second Ctrl-C must not break into the clean-up of the first
+    with first_sigint_only(restore=argv is not None) as sigint:
         code = _main(argv, sigint)
     if sigint.interrupted and code != 130:  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
         click.echo("simspad: interrupted", err=True)

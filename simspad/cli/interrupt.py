@@ -23,11 +23,14 @@ class SigintState:
 
 
 @contextlib.contextmanager
-def first_sigint_only() -> Iterator[SigintState]:
+def first_sigint_only(restore: bool = True) -> Iterator[SigintState]:
     """Turn the first SIGINT into ``KeyboardInterrupt`` and ignore every later one.
 
-    Without an interrupt the previous handler is restored on exit (``main`` is also called inside test
-    processes). A ``KeyboardInterrupt`` that Python swallows (raised inside a weakref callback or a ``__del__``,
+    Without an interrupt the previous handler is restored on exit when ``restore`` (``main`` is also called
+    inside test processes); with ``restore=False`` (the ``simspad`` program itself, which exits next) SIGINT is
+    ignored from then on: the work is done, and a press while the interpreter exits (joining pools and threads)
+    would otherwise raise there and end the process by SIGINT, with no line and status −2 instead of the
+    command's own. A ``KeyboardInterrupt`` that Python swallows (raised inside a weakref callback or a ``__del__``,
     where it is only reported) is not reported; the state yielded says that SIGINT arrived. Where SIGINT was already ignored (a background job) or outside the main thread, a no-op.
     """
     state = SigintState()
@@ -63,4 +66,4 @@ def first_sigint_only() -> Iterator[SigintState]:
             # ends an exit interrupted that way by SIGINT: status −2 after the one line, not 130.
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         else:
-            signal.signal(signal.SIGINT, previous)
+            signal.signal(signal.SIGINT, previous if restore else signal.SIG_IGN)

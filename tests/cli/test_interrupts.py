@@ -12,6 +12,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.helpers.evaluation_data import write_dataset
@@ -50,8 +51,10 @@ def long_evaluation(tmp_path_factory) -> Path:
     """A dataset whose evaluation lasts seconds after its workers start: the session's shared one (two
     recordings) is scored in ~0.3 s once the workers have imported, so both presses could land after the command
     had returned, while the interpreter shuts down (its signal handlers reset: death by SIGINT, no line)."""
-    return write_dataset(tmp_path_factory.mktemp("interrupts") / "data", luxes=(1.0, 3.0, 10.0, 30.0, 100.0, 300.0),
-                         sequences=("ramp", "slope"))
+    # 96 recordings, 192 runs: ≈ 1.7 s of scoring on a fast machine (its forked workers start with no imports to
+    # wait for), where 12 recordings were done 0.25 s after the workers started, before the first press landed
+    return write_dataset(tmp_path_factory.mktemp("interrupts") / "data", luxes=tuple(float(f"{x:.3g}") for x in np.geomspace(1.0, 1000.0, 24)),
+                         sequences=("ramp", "slope", "step", "flat"))
 
 
 @pytest.mark.parametrize("gap_s", [0.05, 0.5])
@@ -91,3 +94,29 @@ def test_interrupt_from_anywhere_leaves_sigint_ignored_to_the_end(child_env):
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["130", "True"]
     assert done.stderr.strip().splitlines() == ["simspad: interrupted"]
+
+
+_CTRL_C_WHILE_EXITING = r"""
+import atexit, os, signal, sys, time
+import simspad.cli.app as app
+
+def press_ctrl_c():  # a Ctrl-C that lands after the command's work, while the interpreter exits
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.1)
+
+atexit.register(press_ctrl_c)
+app.cli.main = lambda **kwargs: None  # the command: done at once
+sys.argv = ["simspad", "evaluate", "x"]
+sys.exit(app.main())
+"""
+
+
+def test_ctrl_c_while_the_program_exits_is_ignored(child_env):
+    """The command's work is done and the interpreter is exiting (joining its pools and threads) when Ctrl-C is
+    pressed: the process ends with the command's own status and prints nothing. With Python's handler put back at
+    the end of the command, the press raised in the exit: a traceback, or death by SIGINT with status −2 and no
+    line (seen in `test_double_ctrl_c_is_one_line[evaluate-0.5]` when the evaluation finished before the press)."""
+    done = subprocess.run([os.sys.executable, "-c", _CTRL_C_WHILE_EXITING], capture_output=True, text=True,
+                          env=child_env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "", done.stderr
