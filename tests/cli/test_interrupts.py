@@ -53,7 +53,8 @@ def long_evaluation(tmp_path_factory) -> Path:
     had returned, while the interpreter shuts down (its signal handlers reset: death by SIGINT, no line)."""
     # 96 recordings, 192 runs: ≈ 1.7 s of scoring on a fast machine (its forked workers start with no imports to
     # wait for), where 12 recordings were done 0.25 s after the workers started, before the first press landed
-    return write_dataset(tmp_path_factory.mktemp("interrupts") / "data", luxes=tuple(float(f"{x:.3g}") for x in np.geomspace(1.0, 1000.0, 24)),
+    luxes = tuple(float(f"{x:.3g}") for x in np.geomspace(1.0, 1000.0, 24))
+    return write_dataset(tmp_path_factory.mktemp("interrupts") / "data", luxes=luxes,
                          sequences=("ramp", "slope", "step", "flat"))
 
 
