@@ -3,6 +3,7 @@
 import dataclasses
 import math
 
+import h5py
 import numba
 import numpy as np
 import pytest
@@ -242,6 +243,34 @@ def test_same_seed_same_events_whatever_the_chunking_and_threads(tmp_path):
         np.testing.assert_array_equal(a[key], b[key])
         np.testing.assert_array_equal(a[key], d[key])
     assert a["t"].size != c["t"].size or not np.array_equal(a["t"], c["t"])
+
+
+@pytest.mark.parametrize("chunk_rows", [None, 64])
+def test_event_columns_take_their_size_on_disk(tmp_path, monkeypatch, chunk_rows):
+    """Fewer events than a chunk: each column is stored in one chunk exactly as long as the events (a chunk of
+    65 536 rows held ≈ 0.9 MiB of zeros for a few hundred events). More (chunks of 64 rows here): whole chunks, and
+    the events are those of the same run with the default chunk, row for row."""
+    params = EventParams(shot_noise_rate_hz_at_1lux=20.0, hot_pixel_fraction=0.05)
+    rng = np.random.default_rng(1)
+    times = np.linspace(0.0, 0.05, 26)
+    frames = 1e16 * np.exp(rng.normal(0, 0.5, (26, 12, 10)))
+    if chunk_rows is not None:
+        monkeypatch.setattr(events.simulator, "EVENT_CHUNK_ROWS", chunk_rows)
+    ev, _, _ = _run(tmp_path, times, frames, params, seed=4)
+    n = ev["t"].size
+    assert 500 < n < events.EVENT_CHUNK_ROWS  # the package constant: unpatched
+    with h5py.File(tmp_path / "e.h5", "r") as f:
+        for name, dtype in (("t", np.int64), ("x", np.uint16), ("y", np.uint16), ("p", np.uint8),
+                            ("label", np.uint8)):
+            ds = f[f"events/{name}"]
+            rows = ds.chunks[0]
+            assert rows == (n if chunk_rows is None else chunk_rows)
+            assert ds.id.get_storage_size() == -(-n // rows) * rows * np.dtype(dtype).itemsize
+    if chunk_rows is not None:
+        monkeypatch.undo()
+        ref, _, _ = _run(tmp_path, times, frames, params, seed=4, name="ref.h5")
+        for key in ("t", "x", "y", "p", "label", "ms_to_idx"):
+            np.testing.assert_array_equal(ev[key], ref[key])
 
 
 def test_jitter_draws_are_standard_normal():
