@@ -84,30 +84,48 @@ class Appender:
     Rows are buffered and written one whole HDF5 chunk per resize, so the sequence of HDF5 operations (and with
     it the file's byte layout) depends only on the rows appended, never on how callers batch them: the same
     data gives the same bytes whatever the chunking, thread count or executor of the simulator.
+
+    ``create(chunk_rows)`` makes the dataset ``name``. A growable one is made when its first whole chunk is
+    written, or at :meth:`flush` with one chunk exactly as long as its rows if fewer came: HDF5 stores an
+    unfiltered chunk whole, so a few hundred events in chunks of 65 536 rows took ≈ 0.9 MiB of zeros (21 % of the
+    mini dataset's bytes). A presized one (``n_rows`` known) is made at once, its chunks no longer than itself.
     """
 
-    def __init__(self, dataset: h5py.Dataset):
-        self.dataset = dataset
-        self.chunk_rows = int(dataset.chunks[0])
+    def __init__(self, name: str, create, chunk_rows: int, tail_shape: tuple, dtype, presized: bool):
+        self.name = name
+        self._create = create
+        self.chunk_rows = int(chunk_rows)
+        self.tail_shape = tuple(tail_shape)
+        self.dtype = np.dtype(dtype)
         # A dataset created at its final, fixed length (the caller knew it) is filled in place: no resize per chunk
-        self._presized = dataset.maxshape[0] is not None
-        # A whole chunk of an unfiltered numeric dataset goes to the file as it is (H5Dwrite_chunk): half the CPU
-        # time of a selection write, same bytes in the same place.
-        self._direct = dataset.dtype.kind in "biuf" and dataset.id.get_create_plist().get_nfilters() == 0
-        self.n = 0 if self._presized else dataset.shape[0]
-        self._written = self.n
+        self._presized = presized
+        self.dataset = None
+        if presized:
+            self._open(self.chunk_rows)
+        self.n = 0
+        self._written = 0
         self._pending: list[np.ndarray] = []
         self._pending_rows = 0
 
+    def _open(self, rows: int) -> h5py.Dataset:
+        """The dataset, created now with chunks of at most ``rows`` rows if it does not exist yet."""
+        if self.dataset is None:
+            self.dataset = self._create(max(1, min(self.chunk_rows, rows)))
+            self.chunk_rows = int(self.dataset.chunks[0])
+            # A whole chunk of an unfiltered numeric dataset goes to the file as it is (H5Dwrite_chunk): half the
+            # CPU time of a selection write, same bytes in the same place.
+            self._direct = self.dtype.kind in "biuf" and self.dataset.id.get_create_plist().get_nfilters() == 0
+        return self.dataset
+
     def append(self, data) -> None:
         """Append rows (``data.shape[1:]`` must equal the dataset's tail shape)."""
-        data = np.asarray(data, dtype=self.dataset.dtype)
-        if data.shape[1:] != self.dataset.shape[1:]:
-            raise ValueError(f"{self.dataset.name}: rows of shape {data.shape[1:]}, expected {self.dataset.shape[1:]}")
+        data = np.asarray(data, dtype=self.dtype)
+        if data.shape[1:] != self.tail_shape:
+            raise ValueError(f"{self.name}: rows of shape {data.shape[1:]}, expected {self.tail_shape}")
         if data.shape[0] == 0:
             return
         if self._presized and self.n + data.shape[0] > self.dataset.shape[0]:
-            raise ValueError(f"{self.dataset.name}: {self.n + data.shape[0]} rows appended to a dataset created "
+            raise ValueError(f"{self.name}: {self.n + data.shape[0]} rows appended to a dataset created "
                              f"with {self.dataset.shape[0]}")
         self._pending.append(data)
         self._pending_rows += data.shape[0]
@@ -119,27 +137,28 @@ class Appender:
 
     def flush(self) -> None:
         """Write every buffered row (called by :class:`RecordingWriter` before closing)."""
+        self._open(self._pending_rows)
         self._write(final=True)
         if self._presized and self._written != self.dataset.shape[0]:
-            raise ValueError(f"{self.dataset.name}: {self._written} rows appended to a dataset created with "
+            raise ValueError(f"{self.name}: {self._written} rows appended to a dataset created with "
                              f"{self.dataset.shape[0]}")
 
     def _write(self, final: bool) -> None:
         if not self._pending:
             return
         rows = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
+        dataset = self._open(rows.shape[0])
         step = self.chunk_rows
         full = (rows.shape[0] // step) * step
         end = rows.shape[0] if final else full
         for i in range(0, end, step):
             block = rows[i : min(i + step, end)]
             if not self._presized:
-                self.dataset.resize(self._written + block.shape[0], axis=0)
+                dataset.resize(self._written + block.shape[0], axis=0)
             if self._direct and block.shape[0] == step:
-                self.dataset.id.write_direct_chunk((self._written,) + (0,) * (rows.ndim - 1),
-                                                   np.ascontiguousarray(block))
+                dataset.id.write_direct_chunk((self._written,) + (0,) * (rows.ndim - 1), np.ascontiguousarray(block))
             else:
-                self.dataset[self._written : self._written + block.shape[0]] = block
+                dataset[self._written : self._written + block.shape[0]] = block
             self._written += block.shape[0]
         rest = rows[end:].copy()  # less than a chunk, kept: a copy, so callers may reuse their buffers
         self._pending = [rest] if rest.shape[0] else []
@@ -252,7 +271,8 @@ class RecordingWriter:
     def append_dataset(self, name: str, tail_shape: tuple, dtype, chunk_rows: int,
                        attrs: dict | None = None, n_rows: int | None = None,
                        storage: dict | None = None) -> Appender:
-        """Create a dataset of shape ``(0, *tail_shape)`` growable along axis 0, chunked ``chunk_rows`` rows.
+        """A dataset of shape ``(0, *tail_shape)`` growable along axis 0, chunked ``chunk_rows`` rows (fewer when it
+        ends shorter than a chunk: it is created once its first chunk is full, or when the writer closes).
 
         With ``n_rows`` (the final length, when the caller knows it) the dataset is created at that length and
         filled in place (no resize per chunk); exactly ``n_rows`` rows must then be appended. ``storage``: the
@@ -265,10 +285,15 @@ class RecordingWriter:
             rows, max_rows, chunk_rows = int(n_rows), int(n_rows), min(chunk_rows, int(n_rows))  # chunk ≤ length
         else:
             rows, max_rows = 0, None
-        ds = self.h5.create_dataset(name, shape=(rows, *tail_shape), maxshape=(max_rows, *tail_shape), dtype=dtype,
-                                    chunks=(chunk_rows, *tail_shape), track_times=False, **(storage or {}))
-        for key, value in (attrs or {}).items():
-            ds.attrs[key] = _attr_value(value)
-        appender = Appender(ds)
+
+        def create(chunks: int) -> h5py.Dataset:
+            ds = self.h5.create_dataset(name, shape=(rows, *tail_shape), maxshape=(max_rows, *tail_shape),
+                                        dtype=dtype, chunks=(chunks, *tail_shape), track_times=False,
+                                        **(storage or {}))
+            for key, value in (attrs or {}).items():
+                ds.attrs[key] = _attr_value(value)
+            return ds
+
+        appender = Appender(name, create, chunk_rows, tail_shape, dtype, presized=bool(n_rows))
         self._appenders.append(appender)
         return appender

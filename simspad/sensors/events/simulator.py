@@ -195,20 +195,13 @@ def iter_knot_chunks(flux_tl, t0: float, t1: float, params: EventParams, max_byt
 
 
 class _EventsWriter:
-    """Appends sorted event batches to ``/events`` and counts what ``ms_to_idx`` and the attrs need.
-
-    The column datasets are created once :data:`EVENT_CHUNK_ROWS` events have arrived, or at :meth:`close` with one
-    chunk as long as all the events when fewer arrived: HDF5 stores an unfiltered chunk whole, so a recording of a
-    few hundred events in chunks of 65 536 rows took ≈ 0.9 MiB of zeros (21 % of the mini dataset's bytes).
-    """
+    """Appends sorted event batches to ``/events`` and counts what ``ms_to_idx`` and the attrs need."""
 
     def __init__(self, writer, width: int, t1: float):
-        self.writer = writer
         self.width = width
         self.t1 = t1
-        self.columns = None  # name -> Appender, once created
-        self._held: list[dict] = []  # batches before then
-        self._n_held = 0
+        self.columns = {name: writer.append_dataset(f"events/{name}", (), dtype, chunk_rows=EVENT_CHUNK_ROWS)
+                        for name, dtype in _EVENT_COLUMNS}
         n_ms = int(math.ceil(round(t1 * 1e3, 9))) + 1
         self.boundaries_us = np.arange(n_ms, dtype=np.int64) * 1000
         self.ms_to_idx = np.zeros(n_ms, dtype=np.uint64)
@@ -223,32 +216,12 @@ class _EventsWriter:
         if t_us.size == 0:
             return
         self.ms_to_idx[:] += np.searchsorted(t_us, self.boundaries_us, side="left").astype(np.uint64)
-        rows = {"t": t_us, "x": (pixel % self.width).astype(np.uint16), "y": (pixel // self.width).astype(np.uint16),
-                "p": pol, "label": label}
+        self.columns["t"].append(t_us)
+        self.columns["x"].append((pixel % self.width).astype(np.uint16))
+        self.columns["y"].append((pixel // self.width).astype(np.uint16))
+        self.columns["p"].append(pol)
+        self.columns["label"].append(label)
         self.counts[:] += np.bincount(label, minlength=4)[:4]
-        if self.columns is None:
-            self._held.append({name: np.array(column) for name, column in rows.items()})  # the caller may reuse
-            self._n_held += t_us.size
-            if self._n_held >= EVENT_CHUNK_ROWS:
-                self._create(EVENT_CHUNK_ROWS)
-            return
-        self._append(rows)
-
-    def close(self) -> None:
-        """Create the datasets if fewer than a chunk of events arrived (one chunk holding them all)."""
-        if self.columns is None:
-            self._create(max(1, self._n_held))
-
-    def _create(self, chunk_rows: int) -> None:
-        self.columns = {name: self.writer.append_dataset(f"events/{name}", (), dtype, chunk_rows=chunk_rows)
-                        for name, dtype in _EVENT_COLUMNS}
-        for rows in self._held:
-            self._append(rows)
-        self._held, self._n_held = [], 0
-
-    def _append(self, rows: dict) -> None:
-        for name, _ in _EVENT_COLUMNS:
-            self.columns[name].append(rows[name])
 
 
 def simulate_events(writer, flux_tl, t0: float, t1: float, params: EventParams, rng: np.random.Generator,
@@ -291,7 +264,6 @@ def simulate_events(writer, flux_tl, t0: float, t1: float, params: EventParams, 
     for knot_t, knot_current in chunks:
         out.write(sim.advance(knot_t, knot_current))
     out.write(sim.finish())
-    out.close()
     writer.write_dataset("events/ms_to_idx", out.ms_to_idx)
 
     counts = out.counts
