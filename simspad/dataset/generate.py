@@ -321,8 +321,8 @@ def show_written_keyframes(out_dir: Path, running, chunked: dict, partial: dict,
         state = chunked.get(r.rel_dir)
         if not c or state is None or not state.names or state.deferred.intersection(c):
             continue
-        folder = out_dir / r.rel_dir
-        written = sum((folder / state.names[i]).name in files_in((folder / state.names[i]).parent) for i in c)
+        paths = [out_dir / r.rel_dir / state.names[i] for i in c]
+        written = sum(p.name in files_in(p.parent) for p in paths)
         if written != partial.get(job, 0):
             bar.update(written - partial.get(job, 0))
             partial[job] = written
