@@ -51,12 +51,16 @@ def dcr_map(shape: tuple[int, int], params: SpadParams, rng: np.random.Generator
     ``hot_pixel_fraction`` of pixels, chosen at random, are hot: log-normal around ``hot_pixel_dcr_cps`` with
     the same σ.
     """
+    # Each pixel is hot independently with probability f: the same law as a binomial number of hot pixels at
+    # uniformly chosen places, which costs ~0.1 ms per 512² instead of ~0.9 for a uniform draw per pixel.
+    n_pixels = math.prod(shape)
+    hot = rng.choice(n_pixels, size=rng.binomial(n_pixels, params.hot_pixel_fraction), replace=False, shuffle=False)
     # float32 throughout (the map's own precision): half the time of float64 draws and temporaries
-    hot = rng.random(shape, dtype=np.float32) < np.float32(params.hot_pixel_fraction)
-    dcr = rng.standard_normal(shape, dtype=np.float32)
-    dcr *= np.float32(params.dcr_log_sigma)
-    np.exp(dcr, out=dcr)
-    dcr *= np.where(hot, np.float32(params.hot_pixel_dcr_cps), np.float32(params.dcr_median_cps))
+    spread = rng.standard_normal(shape, dtype=np.float32)
+    spread *= np.float32(params.dcr_log_sigma)
+    np.exp(spread, out=spread)
+    dcr = spread * np.float32(params.dcr_median_cps)
+    dcr.ravel()[hot] = spread.ravel()[hot] * np.float32(params.hot_pixel_dcr_cps)
     return dcr
 
 

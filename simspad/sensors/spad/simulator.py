@@ -202,9 +202,12 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     buffer = None
     for k0 in range(0, n, m):
         mm = min(m, n - k0)
-        # one buffer for every chunk (the appender copies the rows it keeps): no fresh pages to fault in
-        buffer = chunker.chunk(k0, mm, out=buffer)
-        bits.append(buffer)
+        # one buffer for every chunk, the shorter last one included (the appender copies the rows it keeps): no
+        # fresh pages to fault in
+        if buffer is None:
+            buffer = np.empty((mm, H, (W + 7) // 8), np.uint8)
+        rows = chunker.chunk(k0, mm, out=buffer[:mm])
+        bits.append(rows)
         t_start.append(t0 + (k0 + np.arange(mm)) * params.bin_s)
         if bar is not None:
             bar.update(mm)
