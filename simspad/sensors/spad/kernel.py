@@ -196,6 +196,16 @@ def _secondaries(state, events, n_events, countdown, k, y, x, shape, response):
 
 
 @numba.njit(inline="always")
+def _one_minus_exp_neg(x):
+    """1 − e^(−x) for x ≥ 0 to double precision: below 2⁻⁷ its Taylor series to x⁶ (the first term left out is
+    < 5·10⁻¹⁷ of the value), ~10× cheaper than ``expm1``, which the sparse sampler called once per byte (≈ 1 ms of
+    a 10 ms, 512 × 512 recording at P(1) = 0.001)."""
+    if x < 0.0078125:
+        return x * (1.0 - x * 0.5 * (1.0 - x * (1.0 / 3.0) * (1.0 - x * 0.25 * (1.0 - x * 0.2 * (1.0 - x * (1.0 / 6.0))))))
+    return -math.expm1(-x)
+
+
+@numba.njit(inline="always")
 def _lam(layout, k, y, x, dark):
     """Λ of bin k at pixel (y, x): the weighted sum of its run's keyframes, plus the dark term."""
     r = layout.bin_run[k]
@@ -380,7 +390,7 @@ def spad_chunk(out, events, layout, response, seed):
                 rate = hi_byte if joint else lam_hi[g]
                 if rate <= 0.0:
                     continue
-                p_max = -math.expm1(-rate)
+                p_max = _one_minus_exp_neg(rate)
                 inv_lam = 1.0 / rate
                 n_slots = 8 * m if joint else m
                 s = np.int64(-1)
