@@ -29,15 +29,16 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
   (≈ 60 ns; the undecided pixels cost a data-dependent branch each), 2.5× slower at 0.3 (no faster with a
   per-block fall-back to slices), while the bytes where it would win (P(1) ≲ 0.03) go to the sparse sampler.
 
-Where the time goes, per call of 512 bins of the scene of benchmarks/bench_spad.py (the kernel with parts
-removed, in one process; an AMD EPYC with AVX-512): every byte dense, ≈ 75 ms at any mean P(1), of which ≈ 38
-drawing and comparing (:func:`~simspad.sensors.spad.dense_bits.dense_bits`), ≈ 13 advancing z by its per-bin
-factor and ≈ 24 the rest (each run's set-up, the row bounds, storing the block); with the sampler chosen per
-byte, ≈ 80 ms at 0.05 and ≈ 10 at 0.001. Measured earlier on another machine, at 0.001: ≈ 2.5 fixed, ≈ 4
-storing the block (16 MB to memory), ≈ 4 drawing and ≈ 4 thinning. Tried against this kernel with the same bytes and no
-gain beyond the ± 5–10 % between alternating calls: thinning without branches (the exact Λ_k for every
-candidate: 1.14–1.2× slower), per-run bounds of Λ for the squeeze, candidates drawn in batches (in a function of their
-own) before thinning, a padded block (no cache-set aliasing between bins), and the dense set-up of each run
+Where the time goes, per call of 512 bins of the scene of benchmarks/bench_spad.py (the kernel with parts removed,
+in one process; an AMD EPYC with AVX-512): every byte dense, ≈ 75 ms at any mean P(1), of which ≈ 38 drawing and
+comparing (:func:`~simspad.sensors.spad.dense_bits.dense_bits`), ≈ 13 advancing z by its per-bin factor and ≈ 24 the
+rest (each run's set-up, the row bounds, storing the block); with the sampler chosen per byte, ≈ 80 ms at 0.05 and
+≈ 7.5 at 0.001: the per-row set-up ≈ 1.4, each byte's set-up ≈ 0.75, zeroing the block ≈ 1, storing it ≈ 1.4 and the
+candidates ≈ 2.9 (≈ 1.2 per detection, ≈ 17 ns each). Measured earlier on another machine, at 0.001: ≈ 2.5 fixed,
+≈ 4 storing the block (16 MB to memory), ≈ 4 drawing and ≈ 4 thinning. Tried against this kernel with the same bytes
+and no gain beyond the ± 5–10 % between alternating calls: thinning without branches (the exact Λ_k for every
+candidate: 1.14–1.2× slower), per-run bounds of Λ for the squeeze, candidates drawn in batches (in a function of
+their own) before thinning, a padded block (no cache-set aliasing between bins), and the dense set-up of each run
 computed for the dense bytes only instead of the whole row; and, for the dense sampler, advancing z inside
 :func:`~simspad.sensors.spad.dense_bits.dense_bits` (into a second buffer, so that ties still see the old z): its
 loop then no longer vectorises, 5–8× slower.
@@ -198,10 +199,11 @@ def _secondaries(state, events, n_events, countdown, k, y, x, shape, response):
 @numba.njit(inline="always")
 def _one_minus_exp_neg(x):
     """1 − e^(−x) for x ≥ 0 to double precision: below 2⁻⁷ its Taylor series to x⁶ (the first term left out is
-    < 5·10⁻¹⁷ of the value), ~10× cheaper than ``expm1``, which the sparse sampler called once per byte (≈ 1 ms of
-    a 10 ms, 512 × 512 recording at P(1) = 0.001)."""
+    < 5·10⁻¹⁷ of the value), ~10× cheaper than ``expm1``, which the sparse sampler called once per byte (≈ 1 ms
+    of a 10 ms, 512 × 512 recording at P(1) = 0.001)."""
     if x < 0.0078125:
-        return x * (1.0 - x * 0.5 * (1.0 - x * (1.0 / 3.0) * (1.0 - x * 0.25 * (1.0 - x * 0.2 * (1.0 - x * (1.0 / 6.0))))))
+        return x * (1.0 - x * 0.5 * (1.0 - x * (1.0 / 3.0) * (1.0 - x * 0.25 * (1.0 - x * 0.2
+                                                                                  * (1.0 - x * (1.0 / 6.0))))))
     return -math.expm1(-x)
 
 
