@@ -78,6 +78,8 @@ PROBE_DURATIONS_S = (0.01, 0.05)
 #: 256 × 192 px, where the simulators' costs per pixel are within ~10 % of 512 × 512's, for ~10 s more probing.
 PROBE_MAX_UPSAMPLE = 4
 MIB = 1024**2
+#: Bytes of ground truth per pixel and instant: ``/gt/flux`` and ``/gt/depth``, float32 each, unfiltered.
+GT_BYTES_PER_PIXEL = 8
 
 
 def _vm_hwm_bytes() -> int | None:
@@ -490,16 +492,18 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
 
 
 def disk_needed_bytes(spec, out_dir) -> int:
-    """Bytes the recordings of ``spec`` not yet in ``out_dir`` will take, from sizes alone (no measurement): SPAD
-    bit-planes (one bit per pixel and bin), frames (2 bytes per pixel) and ground truth (4 bytes per pixel and
-    frame), uncompressed. Events and renders are left out (they need :func:`measure_unit_costs`), so this is the
-    quick check ``generate`` makes before every run."""
+    """An upper bound of the bytes that the SPAD bits, frames and ground truth of the recordings of ``spec`` not yet
+    in ``out_dir`` will take, from sizes alone (no measurement): one bit per pixel and SPAD bin, 2 bytes per pixel
+    and frame, 8 per pixel and ground-truth instant (flux and depth, float32), uncompressed (a filter only shrinks
+    them). Events and renders are left out (they need :func:`measure_unit_costs`). ``generate`` checks this bound
+    first and measures the estimate only when the bound does not fit the free disk."""
 
     spad, frames = spec.sensors.get("spad"), spec.sensors.get("frames")
     total = 0
     for seq in spec.sequences:
         w, h = seq.resolution
-        per = int(spec.evaluation.rate_hz * seq.duration_s) * w * h * 4
+        # /gt/flux and /gt/depth: SimSPAD's renders always carry depth
+        per = int(spec.evaluation.rate_hz * seq.duration_s) * w * h * GT_BYTES_PER_PIXEL
         if spad is not None:
             gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
             per += n_bins(seq.duration_s, spad.params.bin_s, gate) * h * math.ceil(w / 8)
@@ -509,4 +513,22 @@ def disk_needed_bytes(spec, out_dir) -> int:
             for lux in spec.lux:
                 if not (Path(out_dir) / recording_rel_path(seq.name, lux, k)).is_file():
                     total += per
+    return total
+
+
+def dataset_bytes_on_disk(out_dir) -> int:
+    """Bytes the recordings and renders already in ``out_dir`` take (hard-linked keyframes counted once)."""
+    seen, total = set(), 0
+    for sub in ("recordings", "renders"):
+        root = Path(out_dir) / sub
+        if not root.is_dir():
+            continue
+        for path in root.rglob("*"):
+            try:
+                st = path.lstat()
+            except OSError:
+                continue
+            if path.is_file() and (st.st_dev, st.st_ino) not in seen:
+                seen.add((st.st_dev, st.st_ino))
+                total += st.st_size
     return total

@@ -341,11 +341,11 @@ def test_dead_worker_is_retried_once_then_failed(tiny, monkeypatch):
         raise_for_failures(res)
 
 
-def test_estimate_matches_the_generated_dataset(tiny, monkeypatch):
+def test_estimate_matches_the_generated_dataset(tiny, monkeypatch, capsys):
     """`generate --estimate` from measured unit costs: exact keyframe counts, disk within a factor 1.5 of what the
     run wrote, wall time falling with workers; a run that cannot fit the free disk is refused unless --yes."""
     from simspad.cli import generate as cli_generate
-    from simspad.dataset.estimate import estimate_spec, measure_unit_costs
+    from simspad.dataset.estimate import dataset_bytes_on_disk, disk_needed_bytes, estimate_spec, measure_unit_costs
 
     root, spec_path, out, _ = tiny
     spec = load_spec(spec_path)
@@ -362,7 +362,36 @@ def test_estimate_matches_the_generated_dataset(tiny, monkeypatch):
     assert est.wall_s(64) < est.wall_s(2) < est.wall_s(1)
     assert est.peak_memory_bytes(2) > 0
 
+    # What the folder holds: every recording and keyframe (hard links once), nothing else counted.
+    files = {(p.stat().st_dev, p.stat().st_ino): p.stat().st_size
+             for sub in ("recordings", "renders") for p in (out / sub).rglob("*") if p.is_file()}
+    assert dataset_bytes_on_disk(out) == sum(files.values()) >= written + exr
+
+    # The uncompressed bound of SPAD, frames and ground truth (flux and depth) fits with room to spare: no estimate
+    # is measured.
+    bound = disk_needed_bytes(spec, root / "nospace")
+    capsys.readouterr()
+    monkeypatch.setattr(cli_generate, "free_disk_bytes", lambda path: cli_generate.DISK_CHECK_MARGIN * bound)
+    cli_generate.refuse_if_it_will_not_fit(spec, root / "nospace", 2)
+    assert capsys.readouterr().err == ""
+    # Free space between the bound and the estimate (the bound leaves out events and renders): the measured
+    # estimate decides, and here it does not fit.
+    assert bound < est.disk_bytes
+    monkeypatch.setattr(cli_generate, "free_disk_bytes", lambda path: (bound + est.disk_bytes) // 2)
+    with pytest.raises(SimSpadError, match="--yes"):
+        cli_generate.refuse_if_it_will_not_fit(spec, root / "nospace", 2)
+    assert "is more than 1/4 of the free disk" in capsys.readouterr().err
+    # ... and a run it does not fit is refused before anything is written, with the estimate printed.
     monkeypatch.setattr(cli_generate, "free_disk_bytes", lambda path: 1000)
     with pytest.raises(SimSpadError, match="--yes"):
         cli_generate.generate_from_cli(spec_path, out_dir=root / "nospace")
     assert not (root / "nospace").exists()
+    err = capsys.readouterr().err
+    assert "measuring what the run will write" in err and "  disk " in err and "--yes" not in err
+    # Enough room for the estimate: the run goes ahead.
+    monkeypatch.setattr(cli_generate, "free_disk_bytes", lambda path: est.disk_bytes * 11 // 10)
+    cli_generate.refuse_if_it_will_not_fit(spec, root / "nospace", 2)
+    assert "to write" in capsys.readouterr().err
+    # A folder that already holds every recording needs nothing more.
+    monkeypatch.setattr(cli_generate, "free_disk_bytes", lambda path: 1000)
+    cli_generate.refuse_if_it_will_not_fit(spec, out, 2)

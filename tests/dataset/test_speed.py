@@ -75,7 +75,7 @@ def test_disk_check_counts_every_speed_and_skips_recordings_already_there(tmp_pa
     out = tmp_path / "ds"
     need_one, need_both = disk_needed_bytes(one, out), disk_needed_bytes(both, out)
     w, h = 80, 60
-    gt = int(both.evaluation.rate_hz * 0.05) * w * h * 4
+    gt = int(both.evaluation.rate_hz * 0.05) * w * h * 8  # flux and depth, float32 each
     spad_p, frame_p = both.sensors["spad"].params, both.sensors["frames"].params
     spad = n_bins(0.05, spad_p.bin_s, spad_p.bin_s) * h * (w // 8)  # auto gate: counted at one bin
     frames = int(0.05 * frame_p.frame_rate_hz) * w * h * 2
