@@ -59,6 +59,7 @@ from simspad.render.renderer import (
 )
 from simspad.render.settings import RenderSettings
 from simspad.scenes.library import resolve_scene
+from simspad.sensors.recording_size import recording_bytes, recording_samples
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 from simspad.sensors.spad import n_bins
 
@@ -78,8 +79,6 @@ PROBE_DURATIONS_S = (0.01, 0.05)
 #: 256 × 192 px, where the simulators' costs per pixel are within ~10 % of 512 × 512's, for ~10 s more probing.
 PROBE_MAX_UPSAMPLE = 4
 MIB = 1024**2
-#: Bytes of ground truth per pixel and instant: ``/gt/flux`` and ``/gt/depth``, float32 each, unfiltered.
-GT_BYTES_PER_PIXEL = 8
 
 
 def _vm_hwm_bytes() -> int | None:
@@ -493,27 +492,21 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
 
 def disk_needed_bytes(spec, out_dir) -> int:
     """An upper bound of the bytes that the SPAD bits, frames and ground truth of the recordings of ``spec`` not yet
-    in ``out_dir`` will take, from sizes alone (no measurement): one bit per pixel and SPAD bin, 2 bytes per pixel
-    and frame, 8 per pixel and ground-truth instant (flux and depth, float32), uncompressed (a filter only shrinks
+    in ``out_dir`` will take, from sizes alone (no measurement): uncompressed, as
+    :func:`~simspad.sensors.recording_size.recording_bytes` counts them before each recording (a filter only shrinks
     them). Events and renders are left out (they need :func:`measure_unit_costs`). ``generate`` checks this bound
-    first and measures the estimate only when the bound does not fit the free disk."""
+    first and measures the estimate only when the bound does not fit the free disk with room to spare."""
 
-    spad, frames = spec.sensors.get("spad"), spec.sensors.get("frames")
-    total = 0
+    params = {name: sensor.params for name, sensor in spec.sensors.items()}
+    total = 0.0
     for seq in spec.sequences:
         w, h = seq.resolution
-        # /gt/flux and /gt/depth: SimSPAD's renders always carry depth
-        per = int(spec.evaluation.rate_hz * seq.duration_s) * w * h * GT_BYTES_PER_PIXEL
-        if spad is not None:
-            gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
-            per += n_bins(seq.duration_s, spad.params.bin_s, gate) * h * math.ceil(w / 8)
-        if frames is not None:
-            per += int(seq.duration_s * frames.params.frame_rate_hz) * w * h * 2
+        per = recording_bytes(recording_samples(params, seq.duration_s, spec.evaluation.rate_hz), w, h)
         for k in spec.speed:  # every speed factor is a recording of its own
             for lux in spec.lux:
                 if not (Path(out_dir) / recording_rel_path(seq.name, lux, k)).is_file():
                     total += per
-    return total
+    return int(total)
 
 
 def dataset_bytes_on_disk(out_dir) -> int:
