@@ -404,14 +404,16 @@ def spad_chunk(out, events, layout, response, seed):
                     s += 1 + np.int64(skip)
                     k = s >> 3 if joint else s
                     bit = s & 7 if joint else g
-                    # thinning: keep with p_k / p_max; p_k ≤ Λ_k ≤ lam_hi rejects most of a dim pixel's
-                    # candidates, the squeeze accepts most of the others without evaluating p_k
+                    # thinning: keep with p_k / p_max. The squeeze (below a lower bound of every p_k) accepts
+                    # most candidates without evaluating p_k, so it is tested first: one well-predicted branch
+                    # for them (same decisions as rejecting first; kernel alone at P(1) = 0.001: −8 to −14 %);
+                    # above it, p_k ≤ Λ_k ≤ lam_hi rejects most of a dim pixel's candidates
                     state, u = uniform(state)
                     up = u * p_max
-                    if up >= lam_hi[bit]:
-                        continue
                     x = 8 * xb + bit
                     if up >= lo_bound[bit]:
+                        if up >= lam_hi[bit]:
+                            continue
                         if row_tabulated:
                             r = bin_run[k]
                             lam = max(run_a[r, x] + float(k - layout.run_k0[r]) * run_b[r, x], 0.0)
