@@ -48,6 +48,12 @@ def summary_table(res: GenerateResult) -> str:
     return "\n".join(lines)
 
 
+def _measured_estimate(spec):
+    """(estimate, unit costs) of ``spec``, measured here as ``--estimate`` does, with progress on stderr."""
+    costs = measure_unit_costs(spec, log=lambda msg: print(msg, file=sys.stderr, flush=True))
+    return estimate_spec(spec, costs), costs
+
+
 def refuse_if_it_will_not_fit(spec, target: Path, n_workers: int) -> None:
     """Raise :class:`SimSpadError` (after printing the estimate) when the run will not fit the free disk.
 
@@ -61,8 +67,7 @@ def refuse_if_it_will_not_fit(spec, target: Path, n_workers: int) -> None:
         return
     print(f"the recordings' uncompressed size (≈ {format_bytes(bound)}) is more than 1/{DISK_CHECK_MARGIN} of the "
           f"free disk ({format_bytes(free)}): measuring what the run will write", file=sys.stderr, flush=True)
-    costs = measure_unit_costs(spec, log=lambda msg: print(msg, file=sys.stderr, flush=True))
-    est = estimate_spec(spec, costs)
+    est, costs = _measured_estimate(spec)
     need = max(est.disk_bytes - dataset_bytes_on_disk(target), 0)
     if need > free:
         print(format_estimate(est, costs, workers=n_workers, free_bytes=free), file=sys.stderr, flush=True)
@@ -85,9 +90,8 @@ def generate_from_cli(spec_path=None, out_dir=None, executor: str = "local", sch
     target = Path(out_dir if out_dir is not None else spec.output)
     n_workers = workers or default_workers()
     if estimate_only:
-        costs = measure_unit_costs(spec, log=lambda msg: print(msg, file=sys.stderr, flush=True))
-        print(format_estimate(estimate_spec(spec, costs), costs, workers=n_workers,
-                              free_bytes=free_disk_bytes(target)), flush=True)
+        est, costs = _measured_estimate(spec)
+        print(format_estimate(est, costs, workers=n_workers, free_bytes=free_disk_bytes(target)), flush=True)
         return target
     if not assume_yes:
         refuse_if_it_will_not_fit(spec, target, n_workers)

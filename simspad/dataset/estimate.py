@@ -30,6 +30,7 @@ import json
 import math
 import os
 import shutil
+import stat
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -521,7 +522,7 @@ def dataset_bytes_on_disk(out_dir) -> int:
                 st = path.lstat()
             except OSError:
                 continue
-            if path.is_file() and (st.st_dev, st.st_ino) not in seen:
+            if stat.S_ISREG(st.st_mode) and (st.st_dev, st.st_ino) not in seen:
                 seen.add((st.st_dev, st.st_ino))
                 total += st.st_size
     return total

@@ -82,12 +82,14 @@ class SpadChunker:
     def chunk(self, k0: int, m: int, out: np.ndarray | None = None) -> np.ndarray:
         """Packed bits of bins ``k0 … k0+m−1`` as ``[m, H, ceil(W/8)]`` uint8. Call with consecutive ``k0``.
 
-        ``out``, when given with that shape, is overwritten and returned.
+        ``out``, when given with that frame shape and at least ``m`` rows, has its first ``m`` rows overwritten and
+        returned (a view): one buffer serves every chunk, the shorter last one included.
         """
         H, W = self.tl.height, self.tl.width
         shape = (m, H, (W + 7) // 8)
-        if out is None or out.shape != shape:
+        if out is None or out.shape[1:] != shape[1:] or out.shape[0] < m:
             out = np.empty(shape, np.uint8)  # the kernel writes every byte
+        out = out[:m]
         found = []
         for j0, n in self._sub_chunks(k0, m):
             starts = self.t0 + (k0 + j0 + np.arange(n)) * self.bin_s
@@ -202,12 +204,9 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     buffer = None
     for k0 in range(0, n, m):
         mm = min(m, n - k0)
-        # one buffer for every chunk, the shorter last one included (the appender copies the rows it keeps): no
-        # fresh pages to fault in
-        if buffer is None:
-            buffer = np.empty((mm, H, (W + 7) // 8), np.uint8)
-        rows = chunker.chunk(k0, mm, out=buffer[:mm])
-        bits.append(rows)
+        # one buffer for every chunk (the appender copies the rows it keeps): no fresh pages to fault in
+        buffer = chunker.chunk(k0, mm, out=buffer)
+        bits.append(buffer)
         t_start.append(t0 + (k0 + np.arange(mm)) * params.bin_s)
         if bar is not None:
             bar.update(mm)
