@@ -64,7 +64,7 @@ class RenderPlan:
 
     @property
     def warp(self) -> dict | None:
-        """``{"stride", "threshold"}`` when keyframes are to be synthesized by warping (``--interpolation warp``
+        """``{"stride", "threshold", "emission_layer"}`` when keyframes are to be synthesized by warping (``--interpolation warp``
         and a sequence long enough), else None."""
         schedule = self.timeline.get("schedule", {})
         return schedule.get("warp") if schedule.get("interpolation") == "warp" else None

@@ -195,7 +195,8 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     if n_shared:
         schedule["shared_keyframes"] = {"n_keyframes": n_shared, "time_scale": float(prefix_time_scale)}
     if warp:
-        schedule["warp"] = {"stride": int(settings.warp_stride), "threshold": float(settings.warp_threshold)}
+        schedule["warp"] = {"stride": int(settings.warp_stride), "threshold": float(settings.warp_threshold),
+                            "emission_layer": bool(settings.warp_emission and ms.splits_emission)}
     timeline = dict(
         scene=info.name, scene_hash=base_key["scene"], trajectory=loaded.traj_source,
         trajectory_hash=loaded.traj_hash, start_s=t0, duration_s=float(duration_s),
@@ -415,7 +416,7 @@ def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progres
 def with_warp_results(plan: RenderPlan, chunks: list[dict]) -> RenderPlan:
     """``plan`` with the keyframe files, sources and ``schedule.warp`` fields that the warp chunks reported
     (:func:`simspad.render.warp_render.chunk_result`, any order): what :func:`finalize_render` then writes."""
-    names, sources, warp = merge_chunk_results(plan.n_keyframes, chunks, plan.warp["stride"], plan.warp["threshold"])
+    names, sources, warp = merge_chunk_results(plan.n_keyframes, chunks, plan.warp)
     schedule = dict(plan.timeline["schedule"], n_rendered_keyframes=sources.count("render"), warp=warp)
     return dataclasses.replace(plan, names=tuple(names), sources=tuple(sources),
                                timeline=dict(plan.timeline, schedule=schedule))

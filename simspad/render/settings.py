@@ -71,6 +71,10 @@ class RenderSettings:
         With ``"warp"``: a synthesized keyframe whose two warps disagree by more than this many times a render's
         Monte Carlo noise (relative RMS of their luminance + hole fraction) makes the renderer render the
         keyframes between for real.
+    warp_emission : bool
+        With ``"warp"``: warp only reflected light and render each keyframe's directly visible emission (a
+        depth-1 pass, about a fifteenth of a render), when the scene's integrator allows the split
+        (:attr:`simspad.render.mitsuba_scene.MitsubaScene.splits_emission`).
     """
 
     duration_s: float
@@ -83,6 +87,7 @@ class RenderSettings:
     interpolation: str = DEFAULT_INTERPOLATION
     warp_stride: int = WARP_STRIDE
     warp_threshold: float = WARP_THRESHOLD
+    warp_emission: bool = True
 
     def checked_size(self) -> tuple[int, int]:
         """Check every field; return (width, height) in pixels.
@@ -124,6 +129,8 @@ class RenderSettings:
             bad("warp_stride", f"must be an integer >= 1, got {self.warp_stride!r}")
         if not (isinstance(self.warp_threshold, numbers.Real) and self.warp_threshold >= 0):
             bad("warp_threshold", f"must be a number >= 0, got {self.warp_threshold!r}")
+        if not isinstance(self.warp_emission, bool):
+            bad("warp_emission", f"must be true or false, got {self.warp_emission!r}")
         return width, height
 
 

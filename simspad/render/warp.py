@@ -16,6 +16,9 @@ is carried to the target pose by reprojection (:mod:`simspad.render.reprojection
    inside the image.
 3. **Occlusion-aware blend.** Consistent samples are blended with the linear-in-time weights (1 − w, w); a pixel
    that only one source sees takes that one; a pixel neither sees consistently is a *hole*.
+4. **Emission layer.** When the sources carry their directly visible emission (the same samples, from an
+   emission pass), steps 2–3 move only the reflected light, and the target's own emission pass is added: a
+   bright textured emitter behind thin occluders (the office window) is then rendered, not resampled.
 
 The **disagreement** of a synthesized keyframe measures how far the two warps are from the same image: the
 relative RMS difference of their luminance where both are consistent, plus the fraction of holes
@@ -71,6 +74,10 @@ class WarpSource:
         Per-pixel object ids (:data:`simspad.render.reprojection.OBJECT_ID_CHANNEL`).
     object_poses : tuple of ndarray (4, 4)
         ``object_to_world`` of animated object k at this instant, entry k − 1.
+    emission : ndarray [H, W, 3] float32 or None
+        The directly visible emission inside ``rgb``, from the same samples
+        (:meth:`simspad.render.mitsuba_scene.MitsubaScene.render_emission`). With it only the reflected light
+        ``rgb − emission`` is warped, and the target's own emission pass is added (:func:`synthesize`).
     """
 
     rgb: np.ndarray
@@ -78,6 +85,7 @@ class WarpSource:
     camera_to_world: np.ndarray
     object_id: np.ndarray | None = None
     object_poses: tuple = ()
+    emission: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -166,8 +174,10 @@ class _Prepared:
 
     def __init__(self, src: WarpSource):
         self.src = src
-        self.coeffs = [spline_filter(np.asarray(src.rgb[..., c], dtype=np.float64), order=SPLINE_ORDER,
-                                     mode="nearest") for c in range(3)]
+        moved = np.asarray(src.rgb, dtype=np.float64)
+        if src.emission is not None:  # only reflected light is warped; the target renders its own emission
+            moved = np.maximum(moved - np.asarray(src.emission, dtype=np.float64), 0.0)
+        self.coeffs = [spline_filter(moved[..., c], order=SPLINE_ORDER, mode="nearest") for c in range(3)]
         z = np.asarray(src.depth_z, dtype=np.float64)
         self.z = np.where(np.isfinite(z), z, FAR_DEPTH_M)
         gy, gx = np.gradient(self.z)
@@ -310,8 +320,8 @@ def _no_disagreement(camera: PinholeCamera, with_noise: bool) -> Disagreement:
 
 
 def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: float, to_camera: np.ndarray,
-               to_objects=(), noise_y: np.ndarray | None = None, geometry: tuple | None = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, Disagreement]:
+               to_objects=(), noise_y: np.ndarray | None = None, geometry: tuple | None = None,
+               emission: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, Disagreement]:
     """The keyframe at pose ``to_camera`` between rendered keyframes ``a`` and ``b``.
 
     Parameters
@@ -333,6 +343,11 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
         (:meth:`simspad.render.mitsuba_scene.MitsubaScene.render_depth_ids`). Used instead of the forward splat
         (step 1), whose nearest-pixel rounding misplaces silhouette pixels by a pixel (on the fan's blades those
         flicker into events); they are returned as the keyframe's depth and ids.
+    emission : ndarray [H, W, 3], optional
+        The target's directly visible emission from its own emission pass; both sources must then carry
+        theirs (:attr:`WarpSource.emission`). Only reflected light is warped and blended, and this is added:
+        emitters seen directly (a bright textured window, a screen) are exact rather than resampled, and their
+        antialiasing noise stays where the renderer puts it. ``noise_y`` is then the reflected light's noise.
 
     Returns
     -------
@@ -346,6 +361,8 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
             ids = None if p.src.object_id is None else np.asarray(p.src.object_id, dtype=np.float32).copy()
             return (np.asarray(p.src.rgb, dtype=np.float32).copy(), np.asarray(p.src.depth_z, np.float32).copy(),
                     ids, _no_disagreement(camera, noise_y is not None))
+    if emission is not None and (a.src.emission is None or b.src.emission is None):
+        raise ValueError("a target emission pass needs the emission of both sources")
     if geometry is None:
         z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
     else:
@@ -366,6 +383,8 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
     rgb = (rgb_a * wa[..., None] + rgb_b * wb[..., None]) / norm[..., None]
     both = va & vb
     ya, yb = luminance_from_rgb(rgb_a), luminance_from_rgb(rgb_b)
+    if emission is not None:
+        rgb = rgb + np.asarray(emission, dtype=np.float64)
     mean_y = float(np.mean(luminance_from_rgb(rgb), dtype=np.float64))
     rel_rms = (float(np.sqrt(np.mean((ya[both] - yb[both]) ** 2, dtype=np.float64))) / mean_y
                if both.any() and mean_y > 0 else 0.0)

@@ -43,8 +43,8 @@ from simspad.render.warp_schedule import (
 )
 
 #: Bumped when synthesized pixels from the same anchors would change: part of their cache key.
-WARP_VERSION = 3  # 2: target geometry from a rendered depth + id pass instead of the forward splat; 3: blocks
-# rendered where the warps disagree
+WARP_VERSION = 4  # 2: target geometry from a rendered depth + id pass instead of the forward splat; 3: blocks
+# rendered where the warps disagree; 4: the emission layer (directly visible emission rendered, not warped)
 #: Floor of the per-pixel render noise, as a fraction of its mean: a noiseless render (a flat scene) must not make
 #: every synthesized keyframe fail on round-off.
 MIN_NOISE = 0.05
@@ -68,9 +68,10 @@ class WarpedFrames(NamedTuple):
     blocks_s: float  # wall time of those block renders, s
 
 
-def warp_key(base_key: dict, stride: int, threshold: float) -> dict:
-    """Cache-key fields of synthesized keyframes."""
-    return dict(base_key, warp=WARP_VERSION, warp_stride=int(stride), warp_threshold=float(threshold))
+def warp_key(base_key: dict, warp: dict) -> dict:
+    """Cache-key fields of synthesized keyframes, from a plan's :attr:`RenderPlan.warp` settings."""
+    return dict(base_key, warp=WARP_VERSION, warp_stride=int(warp["stride"]), warp_threshold=float(warp["threshold"]),
+                warp_emission=bool(warp.get("emission_layer", False)))
 
 
 class BlockPatcher:
@@ -145,8 +146,9 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
     """
     times, cam_poses, seed = np.asarray(plan.times_s), np.asarray(plan.camera_to_world), plan.seed
     stride, threshold = plan.warp["stride"], plan.warp["threshold"]
+    with_emission = bool(plan.warp.get("emission_layer", False))
     render_names = plan.names  # a plan's names are those of rendered keyframes until the warp results replace them
-    warp_names = frame_names(warp_key(plan.base_key, stride, threshold), times)
+    warp_names = frame_names(warp_key(plan.base_key, plan.warp), times)
     names = list(warp_names)
     camera = PinholeCamera.from_fov(ms.x_fov_deg, ms.width, ms.height)
     object_names = ms.object_names
@@ -159,6 +161,10 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         objects = object_poses(ts, float(times[i]))
         return tuple(objects[k] for k in object_names)
 
+    def emission(i: int, pass_seed: int) -> np.ndarray | None:
+        """Directly visible emission of keyframe ``i`` (the pose must be set), or None without the layer."""
+        return ms.render_emission(pass_seed) if with_emission else None
+
     def render(i: int) -> WarpSource:
         names[i] = render_names[i]
         if i in ready:
@@ -167,7 +173,10 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         if path.is_file():
             reused[0] += 1
             data = read_exr(path)
-            return WarpSource(data["rgb"], data["z"], cam_poses[i], data.get("object_id"), poses_of(i))
+            if with_emission:  # not stored: a fifteenth of a render, and the keyframe file stays a linear one
+                ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+            return WarpSource(data["rgb"], data["z"], cam_poses[i], data.get("object_id"), poses_of(i),
+                              emission(i, seed))
         tic = time.perf_counter()
         ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
         rgb = ms.render_radiance(seed)
@@ -175,15 +184,16 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         write_frame(path, rgb, depth, object_id)
         frame_times.append(time.perf_counter() - tic)
         compiled.append(counter.take())
-        return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i))
+        return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i), emission(i, seed))
 
     def geometry(i: int) -> tuple:
-        """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance)."""
+        """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance), and its
+        directly visible emission with the layer."""
         tic = time.perf_counter()
         ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
         depth, object_id = ms.render_depth_ids(seed)
         geometry_times.append(time.perf_counter() - tic)
-        return depth, object_id
+        return (depth, object_id) if not with_emission else (depth, object_id, emission(i, seed))
 
     def write(i: int, rgb, depth, object_id) -> None:
         path = out_dir / warp_names[i]
@@ -199,7 +209,12 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         else:
             key0 = read_exr(out_dir / render_names[0])["rgb"]
         render_noise_probe(ms, ts, plan, out_dir)
-        noise_y, noise = noise_map(key0, read_exr(out_dir / noise_probe_name(plan))["rgb"])
+        probe = read_exr(out_dir / noise_probe_name(plan))["rgb"]
+        if with_emission:  # the warps move reflected light only: judge them against its noise
+            ms.set_pose(cam_poses[0], object_poses(ts, float(times[0])))
+            key0 = np.maximum(key0 - (ready[0].emission if first == 0 else emission(0, seed)), 0.0)
+            probe = np.maximum(probe - emission(0, seed + 1), 0.0)
+        noise_y, noise = noise_map(key0, probe)
     patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed,
                            lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
@@ -220,9 +235,9 @@ def chunk_result(done: WarpedFrames, lo: int, hi: int) -> dict:
             "noise": done.noise, "n_geometry": done.n_geometry, "n_blocks": done.n_blocks}
 
 
-def merge_chunk_results(n_keyframes: int, chunks: list[dict], stride: int, threshold: float) -> tuple[list, list, dict]:
+def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) -> tuple[list, list, dict]:
     """Names and sources of every keyframe, and the ``schedule.warp`` fields of ``timeline.json``, from the
-    chunks' :func:`chunk_result` (any order)."""
+    chunks' :func:`chunk_result` (any order) and the plan's warp ``settings`` (:attr:`RenderPlan.warp`)."""
     names, sources = [None] * n_keyframes, [None] * n_keyframes
     scores, holes, patched = {}, {}, {}
     n_geometry = n_blocks = 0
@@ -238,6 +253,11 @@ def merge_chunk_results(n_keyframes: int, chunks: list[dict], stride: int, thres
         noise = c["noise"]
     if any(n is None for n in names):
         raise ValueError("the chunks do not cover every keyframe")
-    warp = {"stride": stride, "threshold": threshold, "render_noise": noise, "n_geometry_passes": n_geometry,
-            "n_block_renders": n_blocks, **describe_scores(scores, holes), **describe_patches(patched)}
+    layer = bool(settings.get("emission_layer", False))
+    # With the layer every keyframe has an emission pass (anchors to subtract, the others to add), and so does
+    # the noise probe; counted from the plan, so the timeline does not depend on how the render was chunked.
+    warp = {"stride": settings["stride"], "threshold": settings["threshold"], "emission_layer": layer,
+            "render_noise": noise, "n_geometry_passes": n_geometry, "n_emission_passes": n_keyframes + 1 if layer else 0,
+            "n_block_renders": n_blocks,
+            **describe_scores(scores, holes), **describe_patches(patched)}
     return names, sources, warp

@@ -136,7 +136,8 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     geometry : callable, optional
         ``geometry(i) -> (depth_z, object_id)``: the rendered depth and ids of keyframe ``i`` (a geometry pass),
         asked once per synthesized keyframe; without it the target geometry is splatted from the sources
-        (:func:`simspad.render.warp.synthesize`).
+        (:func:`simspad.render.warp.synthesize`). A third element, when present, is the keyframe's directly
+        visible emission (an emission pass; the sources then carry theirs, :class:`~simspad.render.warp.WarpSource`).
     on_keyframe : callable, optional
         Called with each keyframe index once it is final (progress).
     patch : Patcher, optional
@@ -180,7 +181,9 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         for i in range(i0 + 1, i1):
             pose, objects = target(i)
             w = float((times[i] - times[i0]) / (times[i1] - times[i0]))
-            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y, geometry_of(i))
+            g = geometry_of(i)
+            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y, None if g is None else g[:2],
+                                   None if g is None or len(g) < 3 else g[2])
         worst = max(f[3].score() for f in frames.values())
         if worst <= threshold:
             for i, (rgb, depth, ids, dis) in frames.items():

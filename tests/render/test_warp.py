@@ -122,6 +122,45 @@ def test_moving_objects_follow_their_own_transform():
     assert dis_s.score() > 2 * dis.score(), (dis_s, dis)
 
 
+def _emission(pose):
+    """A bright, finely textured emitter on the wall (z = 0) outside the square, seen from ``pose``: [H, W, 3]."""
+    _, depth, _ = _trace(pose)
+    d = CAM.rays() @ pose[:3, :3].T
+    o = pose[:3, 3]
+    t = -o[2] / d[..., 2]
+    p = o + t[..., None] * d
+    value = 30.0 * (1.0 + 0.9 * np.sin(41.0 * p[..., 0]) * np.sin(37.0 * p[..., 1]))
+    on_wall = np.abs(depth - t) < 1e-6
+    return (np.where(on_wall, value, 0.0)[..., None] * np.array([1.0, 0.8, 0.6])).astype(np.float32)
+
+
+def test_the_emission_layer_renders_emitters_and_warps_only_reflected_light():
+    # A bright emitter texture finer than the motion's resampling can carry: warped with the rest it is the
+    # frame's whole error; with the emission layer the target's own emission is added to the warped reflected
+    # light, so the synthesized frame is as exact as a warp of the reflected light alone.
+    a, b = _pose(0.0, 0.0), _pose(0.12, -0.06)
+    mid = _pose(0.06, -0.03)
+
+    def source(pose, layer):
+        rgb, z, _ = _trace(pose)
+        e = _emission(pose)
+        return WarpSource(rgb + e, z, pose, emission=e if layer else None)
+
+    truth = _trace(mid)[0] + _emission(mid)
+    plain, *_ = synthesize(CAM, prepare(source(a, False)), prepare(source(b, False)), 0.5, mid)
+    layered, _, _, dis = synthesize(CAM, prepare(source(a, True)), prepare(source(b, True)), 0.5, mid,
+                                    emission=_emission(mid))
+    reflected_only, *_ = synthesize(CAM, prepare(_source(a)), prepare(_source(b)), 0.5, mid)
+    np.testing.assert_allclose(layered, reflected_only + _emission(mid), rtol=1e-5, atol=1e-5)
+    err_plain, err_layer = _rel_rms(plain, truth), _rel_rms(layered, truth)
+    assert err_layer < 0.2 * err_plain, (err_layer, err_plain)
+    # The disagreement is that of the reflected light: the emitter's resampling error no longer counts.
+    _, _, _, dis_reflected = synthesize(CAM, prepare(_source(a)), prepare(_source(b)), 0.5, mid)
+    assert dis.hole_fraction == dis_reflected.hole_fraction
+    with pytest.raises(ValueError, match="emission of both sources"):
+        synthesize(CAM, prepare(_source(a)), prepare(source(b, True)), 0.5, mid, emission=_emission(mid))
+
+
 def test_a_rendered_target_geometry_puts_moving_silhouettes_right():
     # The square moves 0.1 m between the sources. Splatting its pixels forward rounds each to the nearest
     # target pixel, so its outline is off by a pixel here and there (on the fan's blades that flickers into
@@ -233,6 +272,11 @@ def test_warp_render_directory_marks_sources_and_matches_the_linear_render(tmp_p
     assert sources[0] == sources[-1] == "render" and "warp" in sources
     assert warp.n_warped == sources.count("warp") and warp.n_rendered == sources.count("render")
     assert meta["schedule"]["interpolation"] == "warp" and meta["schedule"]["n_rendered_keyframes"] < len(sources)
+    # The emission layer (on by default): an emission pass per synthesized keyframe and per anchor, and the two
+    # of keyframe 0 and its noise probe the noise map is taken from.
+    warp_meta = meta["schedule"]["warp"]
+    assert warp_meta["emission_layer"] is True
+    assert warp_meta["n_emission_passes"] == sources.count("warp") + sources.count("render") + 1
     # The linear schedule renders the same instants; rendered keyframes are shared byte for byte, synthesized
     # ones differ from the renders by about the Monte Carlo noise (two renders' noise), not by the motion.
     linear = render_sequence(folder, ts, RenderSettings(duration_s=0.03, resolution=(32, 24), spp=16,
@@ -255,6 +299,30 @@ def test_warp_render_directory_marks_sources_and_matches_the_linear_render(tmp_p
     assert again.n_warped == warp.n_warped
     for kf in meta["keyframes"]:
         assert (tmp_path / "w" / kf["file"]).read_bytes() == (tmp_path / "w2" / kf["file"]).read_bytes()
+
+
+def test_emission_pass_is_exactly_the_directly_seen_part_of_a_render(tmp_path, _variant):
+    # Office: the window (an emitter 40x brighter than the room) is in view. The emission pass draws the same
+    # camera rays as the radiance render of the same seed, so subtracting it leaves the reflected light, never
+    # below zero; with another seed its antialiasing differs and the difference goes negative at the window.
+    from simspad.render.renderer import load_scene
+
+    ms = load_scene("office", None, 48, 36, 4).ms
+    assert ms.splits_emission
+    full, emission = ms.render_radiance(3), ms.render_emission(3)
+    assert emission.max() > 10.0 and (emission.max(axis=-1) == 0).mean() > 0.5  # the window; most pixels none
+    rest = full - emission
+    assert rest.min() > -1e-6 * full.max(), rest.min()
+    assert (full - ms.render_emission(4)).min() < -1e-3 * full.max()
+    # A path integrator that hides its emitters has no such part to split off.
+    (tmp_path / "s").mkdir()
+    (tmp_path / "s" / "scene.xml").write_text("""<scene version="3.0.0">
+  <integrator type="path"><boolean name="hide_emitters" value="true"/></integrator>
+  <sensor type="perspective" id="camera"><float name="fov" value="40"/></sensor>
+  <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+</scene>
+""")
+    assert not load_scene(tmp_path / "s", None, 8, 6, 1).ms.splits_emission
 
 
 def test_cli_interpolation_flag(tmp_path, _variant):
