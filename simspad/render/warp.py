@@ -175,7 +175,9 @@ class _Prepared:
     def __init__(self, src: WarpSource):
         self.src = src
         moved = np.asarray(src.rgb, dtype=np.float64)
-        if src.emission is not None:  # only reflected light is warped; the target renders its own emission
+        #: The source shows directly seen emission: a target warped from it needs its own emission pass.
+        self.emits = src.emission is not None and bool(np.any(np.asarray(src.emission) > 0))
+        if self.emits:  # only reflected light is warped; the target renders its own emission
             moved = np.maximum(moved - np.asarray(src.emission, dtype=np.float64), 0.0)
         self.coeffs = [spline_filter(moved[..., c], order=SPLINE_ORDER, mode="nearest") for c in range(3)]
         z = np.asarray(src.depth_z, dtype=np.float64)
@@ -348,6 +350,8 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
         theirs (:attr:`WarpSource.emission`). Only reflected light is warped and blended, and this is added:
         emitters seen directly (a bright textured window, a screen) are exact rather than resampled, and their
         antialiasing noise stays where the renderer puts it. ``noise_y`` is then the reflected light's noise.
+        It may be left out when neither source shows any emission (their emission passes are all zero): the
+        warp is then the same as without the layer.
 
     Returns
     -------
@@ -363,6 +367,8 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
                     ids, _no_disagreement(camera, noise_y is not None))
     if emission is not None and (a.src.emission is None or b.src.emission is None):
         raise ValueError("a target emission pass needs the emission of both sources")
+    if emission is None and (a.emits or b.emits):
+        raise ValueError("sources that show directly seen emission need the target's emission pass")
     if geometry is None:
         z, ids, _ = target_geometry(camera, [a, b], to_camera, to_objects)
     else:

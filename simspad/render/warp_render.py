@@ -187,13 +187,17 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i), emission(i, seed))
 
     def geometry(i: int) -> tuple:
-        """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance), and its
-        directly visible emission with the layer."""
+        """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance)."""
         tic = time.perf_counter()
         ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
         depth, object_id = ms.render_depth_ids(seed)
         geometry_times.append(time.perf_counter() - tic)
-        return (depth, object_id) if not with_emission else (depth, object_id, emission(i, seed))
+        return depth, object_id
+
+    def target_emission(i: int) -> np.ndarray:
+        """Directly visible emission of keyframe ``i`` (the same seed as its radiance)."""
+        ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+        return ms.render_emission(seed)
 
     def write(i: int, rgb, depth, object_id) -> None:
         path = out_dir / warp_names[i]
@@ -219,6 +223,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
                            lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
+                                emission=target_emission if with_emission else None,
                                 on_keyframe=lambda i: bar.update(1), patch=patcher, anchors=anchors)
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
                         noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks, patcher.seconds)
@@ -232,7 +237,8 @@ def chunk_result(done: WarpedFrames, lo: int, hi: int) -> dict:
             "scores": {int(i): d.score() for i, d in plan.disagreement.items()},
             "holes": {int(i): d.hole_fraction for i, d in plan.disagreement.items()},
             "patched": {int(i): list(v) for i, v in plan.patched.items()},
-            "noise": done.noise, "n_geometry": done.n_geometry, "n_blocks": done.n_blocks}
+            "noise": done.noise, "n_geometry": done.n_geometry, "n_blocks": done.n_blocks,
+            "n_emission_targets": len(plan.emission_passes)}
 
 
 def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) -> tuple[list, list, dict]:
@@ -240,7 +246,7 @@ def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) ->
     chunks' :func:`chunk_result` (any order) and the plan's warp ``settings`` (:attr:`RenderPlan.warp`)."""
     names, sources = [None] * n_keyframes, [None] * n_keyframes
     scores, holes, patched = {}, {}, {}
-    n_geometry = n_blocks = 0
+    n_geometry = n_blocks = n_emission_targets = 0
     noise = 0.0
     for c in sorted(chunks, key=lambda c: c["lo"]):
         names[c["lo"]:c["hi"] + 1] = c["names"]
@@ -250,14 +256,17 @@ def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) ->
         patched.update({int(k): tuple(v) for k, v in c["patched"].items()})
         n_geometry += c["n_geometry"]
         n_blocks += c["n_blocks"]
+        n_emission_targets += c.get("n_emission_targets", 0)
         noise = c["noise"]
     if any(n is None for n in names):
         raise ValueError("the chunks do not cover every keyframe")
     layer = bool(settings.get("emission_layer", False))
-    # With the layer every keyframe has an emission pass (anchors to subtract, the others to add), and so does
-    # the noise probe; counted from the plan, so the timeline does not depend on how the render was chunked.
+    # With the layer every rendered keyframe has an emission pass (to subtract), and so does the noise probe;
+    # synthesized ones have theirs (to add) where a source shows emission. Counted from what each keyframe needed,
+    # so the timeline does not depend on how the render was chunked (a chunk re-renders its first anchor's).
+    n_emission = sources.count("render") + 1 + n_emission_targets if layer else 0
     warp = {"stride": settings["stride"], "threshold": settings["threshold"], "emission_layer": layer,
-            "render_noise": noise, "n_geometry_passes": n_geometry, "n_emission_passes": n_keyframes + 1 if layer else 0,
+            "render_noise": noise, "n_geometry_passes": n_geometry, "n_emission_passes": n_emission,
             "n_block_renders": n_blocks,
             **describe_scores(scores, holes), **describe_patches(patched)}
     return names, sources, warp

@@ -89,11 +89,14 @@ class WarpPlanResult:
     patched : dict
         Keyframes with blocks rendered for real: index → (cost as a fraction of a render, score of what stayed
         synthesized).
+    emission_passes : set
+        Keyframes given an emission pass as targets of a synthesis (whether they stayed synthesized or not).
     """
 
     sources: list
     disagreement: dict = field(default_factory=dict)
     patched: dict = field(default_factory=dict)
+    emission_passes: set = field(default_factory=set)
 
     @property
     def n_rendered(self) -> int:
@@ -111,6 +114,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                          stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
                          noise_y: np.ndarray | None = None,
                          geometry: Callable[[int], tuple] | None = None,
+                         emission: Callable[[int], np.ndarray] | None = None,
                          on_keyframe: Callable[[int], None] | None = None,
                          patch: Patcher | None = None, anchors: list[int] | None = None) -> WarpPlanResult:
     """Render the anchors, synthesize the rest, render where the warps disagree.
@@ -136,8 +140,12 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     geometry : callable, optional
         ``geometry(i) -> (depth_z, object_id)``: the rendered depth and ids of keyframe ``i`` (a geometry pass),
         asked once per synthesized keyframe; without it the target geometry is splatted from the sources
-        (:func:`simspad.render.warp.synthesize`). A third element, when present, is the keyframe's directly
-        visible emission (an emission pass; the sources then carry theirs, :class:`~simspad.render.warp.WarpSource`).
+        (:func:`simspad.render.warp.synthesize`).
+    emission : callable, optional
+        ``emission(i)``: the directly visible emission of keyframe ``i`` (an emission pass; the sources then carry
+        theirs, :class:`~simspad.render.warp.WarpSource`), asked for each keyframe synthesized between sources
+        of which at least one shows emission. Between two that show none, the warp needs none: an emitter that
+        would come into view only between them is warped like any surface.
     on_keyframe : callable, optional
         Called with each keyframe index once it is final (progress).
     patch : Patcher, optional
@@ -159,6 +167,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     result = WarpPlanResult(sources)
     tick = on_keyframe or (lambda i: None)
     geometries: dict = {}  # keyframe → its geometry pass, until it is written or rendered (≤ stride frames)
+    emissions: dict = {}  # keyframe → its emission pass, likewise
 
     def geometry_of(i: int):
         if geometry is None:
@@ -167,8 +176,17 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
             geometries[i] = geometry(i)
         return geometries[i]
 
+    def emission_of(i: int):
+        if emission is None:
+            return None
+        if i not in emissions:
+            emissions[i] = emission(i)
+            result.emission_passes.add(i)
+        return emissions[i]
+
     def rendered(i: int):
         geometries.pop(i, None)
+        emissions.pop(i, None)
         sources[i] = SOURCE_RENDER
         p = prepare(render(i))
         tick(i)
@@ -181,14 +199,14 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
         for i in range(i0 + 1, i1):
             pose, objects = target(i)
             w = float((times[i] - times[i0]) / (times[i1] - times[i0]))
-            g = geometry_of(i)
-            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y, None if g is None else g[:2],
-                                   None if g is None or len(g) < 3 else g[2])
+            target_emission = emission_of(i) if p0.emits or p1.emits else None
+            frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y, geometry_of(i), target_emission)
         worst = max(f[3].score() for f in frames.values())
         if worst <= threshold:
             for i, (rgb, depth, ids, dis) in frames.items():
                 write(i, rgb, depth, ids)
                 geometries.pop(i, None)
+                emissions.pop(i, None)
                 result.disagreement[i] = dis
                 tick(i)
             return
@@ -201,6 +219,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
                 for i, (rgb, depth, ids, dis) in frames.items():
                     write(i, patch.apply(i, blocks, rgb), depth, ids)
                     geometries.pop(i, None)
+                    emissions.pop(i, None)
                     result.disagreement[i] = dis
                     result.patched[i] = (cost, dis.score_outside(covered))
                     tick(i)

@@ -2,6 +2,7 @@
 schedule, and the ``--interpolation warp`` render directory (tiny Mitsuba renders).
 """
 
+import dataclasses
 import json
 
 import numpy as np
@@ -272,11 +273,21 @@ def test_warp_render_directory_marks_sources_and_matches_the_linear_render(tmp_p
     assert sources[0] == sources[-1] == "render" and "warp" in sources
     assert warp.n_warped == sources.count("warp") and warp.n_rendered == sources.count("render")
     assert meta["schedule"]["interpolation"] == "warp" and meta["schedule"]["n_rendered_keyframes"] < len(sources)
-    # The emission layer (on by default): an emission pass per synthesized keyframe and per anchor, and the two
-    # of keyframe 0 and its noise probe the noise map is taken from.
+    # The emission layer is on by default. This scene shows no emitter (the plane fills the view): every rendered
+    # keyframe and the noise probe get an emission pass, all zero, so no synthesized keyframe needs one, and the
+    # keyframes are those of a warp without the layer, pixel for pixel.
     warp_meta = meta["schedule"]["warp"]
     assert warp_meta["emission_layer"] is True
-    assert warp_meta["n_emission_passes"] == sources.count("warp") + sources.count("render") + 1
+    assert warp_meta["n_emission_passes"] == sources.count("render") + 1
+    render_sequence(folder, ts, RenderSettings(duration_s=0.03, resolution=(32, 24), spp=16, warp_stride=8,
+                                               interpolation="warp", warp_emission=False),
+                    out_dir=tmp_path / "plain", progress=False)
+    plain = json.loads((tmp_path / "plain" / "timeline.json").read_text())
+    assert plain["schedule"]["warp"]["emission_layer"] is False and plain["schedule"]["warp"]["n_emission_passes"] == 0
+    for kf, kp in zip(meta["keyframes"], plain["keyframes"]):
+        assert kf["source"] == kp["source"]
+        a, b = read_exr(tmp_path / "w" / kf["file"]), read_exr(tmp_path / "plain" / kp["file"])
+        np.testing.assert_array_equal(a["rgb"], b["rgb"])
     # The linear schedule renders the same instants; rendered keyframes are shared byte for byte, synthesized
     # ones differ from the renders by about the Monte Carlo noise (two renders' noise), not by the motion.
     linear = render_sequence(folder, ts, RenderSettings(duration_s=0.03, resolution=(32, 24), spp=16,
@@ -323,6 +334,38 @@ def test_emission_pass_is_exactly_the_directly_seen_part_of_a_render(tmp_path, _
 </scene>
 """)
     assert not load_scene(tmp_path / "s", None, 8, 6, 1).ms.splits_emission
+
+
+def test_warp_renders_each_keyframes_emission_where_the_sources_show_some(tmp_path, _variant):
+    # The office window is in view throughout: every synthesized keyframe gets its own emission pass, and where
+    # emission is most of a pixel, the synthesized keyframe is much nearer the linear render's than a warp
+    # without the layer (the window's texture is rendered, not resampled; only the reflected rest is warped).
+    settings = RenderSettings(duration_s=0.012, resolution=(32, 24), spp=4, warp_stride=4, interpolation="warp")
+    render_sequence("office", None, settings, out_dir=tmp_path / "w", progress=False)
+    render_sequence("office", None, dataclasses.replace(settings, warp_emission=False), out_dir=tmp_path / "p",
+                    progress=False)
+    meta = json.loads((tmp_path / "w" / "timeline.json").read_text())
+    sources = [kf["source"] for kf in meta["keyframes"]]
+    assert "warp" in sources
+    assert meta["schedule"]["warp"]["n_emission_passes"] >= len(sources) + 1
+    render_sequence("office", None, RenderSettings(duration_s=0.012, resolution=(32, 24), spp=4,
+                                                   interpolation="linear"), out_dir=tmp_path / "l", progress=False)
+    tw, tp, tl = (Timeline.open(tmp_path / d) for d in ("w", "p", "l"))
+    from simspad.render.renderer import load_scene
+
+    ms = load_scene("office", None, 32, 24, 4).ms
+    err_layer, err_plain = [], []
+    for i, source in enumerate(sources):
+        if source != "warp":
+            continue
+        ms.set_pose(np.asarray(meta["keyframes"][i]["camera_to_world"]), {})
+        lin = tl.rgb_keyframe(i).sum(axis=-1)
+        window = ms.render_emission(meta["renderer"]["seed"]).sum(axis=-1) > 0.9 * lin
+        assert window.sum() >= 10
+        for t, err in ((tw, err_layer), (tp, err_plain)):
+            err.append(((t.rgb_keyframe(i).sum(axis=-1)[window] - lin[window]) / lin[window]) ** 2)
+    rms_layer, rms_plain = (float(np.sqrt(np.mean(np.concatenate(e)))) for e in (err_layer, err_plain))
+    assert rms_layer < 0.03 and rms_layer < 0.5 * rms_plain, (rms_layer, rms_plain)
 
 
 def test_cli_interpolation_flag(tmp_path, _variant):
