@@ -157,6 +157,7 @@ class MitsubaScene:
             self.objects[name] = self._rest_pose(name)
         self.object_names = sorted(self.objects)
         self._object_id_of_shape = self._object_id_lookup(shapes)
+        self._emitter_of_shape = self._emitter_lookup(shapes)
         self.focal_px = focal_length_px(self.x_fov_deg, width)
         self.width, self.height, self.spp = width, height, spp
         self.block_px = block_size_px(width, height)  # blocks of render_radiance_block
@@ -179,6 +180,20 @@ class MitsubaScene:
         table = np.zeros(max(index.values()) + 1, dtype=np.float32)
         for k, name in enumerate(self.object_names, start=1):
             table[index[name]] = k
+        return table
+
+    def _emitter_lookup(self, shapes: dict) -> np.ndarray | None:
+        """Table from Mitsuba's ``shape_index`` AOV to 1 for shapes that emit, 0 for the rest; None when the variant
+        has no registry index (scalar)."""
+        if not self.mi.variant().startswith(("llvm", "cuda")) or not shapes:
+            return None
+        import drjit as dr  # deferred: heavy; only the JIT variants index shapes in a registry
+
+        index = {sid: int(np.asarray(dr.reinterpret_array(self.mi.UInt32, self.mi.ShapePtr(s))).ravel()[0])
+                 for sid, s in shapes.items()}
+        table = np.zeros(max(index.values()) + 1, dtype=bool)
+        for sid, s in shapes.items():
+            table[index[sid]] = s.is_emitter()
         return table
 
     def _rest_pose(self, name: str) -> dict:
@@ -231,6 +246,23 @@ class MitsubaScene:
         :meth:`render_radiance`: the scene's integrator is Mitsuba's ``path`` integrator showing its emitters."""
         integrator = self.scene.integrator()
         return integrator.class_name() == "PathIntegrator" and not integrator.hide_emitters
+
+    def emitter_in_view(self, seed: int) -> bool:
+        """Whether the camera sees an emitter first anywhere at the current pose, by a 1-spp depth + shape pass:
+        an emitting shape, or, where rays escape, an environment emitter. An emitter narrower than a pixel can
+        slip between the samples; True when the variant cannot name shapes (scalar)."""
+        if self._emitter_of_shape is None:
+            return True
+        img = np.array(self.mi.render(self.scene, self.params, sensor=self.depth_sensor,
+                                      integrator=self.depth_id_integrator, seed=seed, spp=DEPTH_SPP),
+                       dtype=np.float32)
+        ray, shape = img[..., 0], np.rint(img[..., 1]).astype(np.int64)
+        table = self._emitter_of_shape
+        hit = ray > 0
+        known = hit & (shape >= 0) & (shape < table.size)
+        if np.any(table[np.clip(shape[known], 0, table.size - 1)]):
+            return True
+        return bool(self.scene.environment() is not None and np.any(~hit))
 
     def render_emission(self, seed: int) -> np.ndarray:
         """The directly visible emission of :meth:`render_radiance` with the same ``seed``: light the camera rays

@@ -76,8 +76,9 @@ class WarpSource:
         ``object_to_world`` of animated object k at this instant, entry k − 1.
     emission : ndarray [H, W, 3] float32 or None
         The directly visible emission inside ``rgb``, from the same samples
-        (:meth:`simspad.render.mitsuba_scene.MitsubaScene.render_emission`). With it only the reflected light
-        ``rgb − emission`` is warped, and the target's own emission pass is added (:func:`synthesize`).
+        (:meth:`simspad.render.mitsuba_scene.MitsubaScene.render_emission`); None: none in view. With it only the
+        reflected light ``rgb − emission`` is warped, and the target's own emission pass is added
+        (:func:`synthesize`).
     """
 
     rgb: np.ndarray
@@ -346,12 +347,12 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
         (step 1), whose nearest-pixel rounding misplaces silhouette pixels by a pixel (on the fan's blades those
         flicker into events); they are returned as the keyframe's depth and ids.
     emission : ndarray [H, W, 3], optional
-        The target's directly visible emission from its own emission pass; both sources must then carry
-        theirs (:attr:`WarpSource.emission`). Only reflected light is warped and blended, and this is added:
-        emitters seen directly (a bright textured window, a screen) are exact rather than resampled, and their
-        antialiasing noise stays where the renderer puts it. ``noise_y`` is then the reflected light's noise.
-        It may be left out when neither source shows any emission (their emission passes are all zero): the
-        warp is then the same as without the layer.
+        The target's directly visible emission from its own emission pass. Only reflected light is warped and
+        blended (each source's ``rgb`` less its :attr:`WarpSource.emission`; a source without one shows none), and
+        this is added: emitters seen directly (a bright textured window, a screen) are exact rather than
+        resampled, and their antialiasing noise stays where the renderer puts it. ``noise_y`` is then the
+        reflected light's noise. Required when a source shows emission; it may be left out when neither does
+        (the warp is then the same as without the layer).
 
     Returns
     -------
@@ -365,8 +366,6 @@ def synthesize(camera: PinholeCamera, a: _Prepared, b: _Prepared, weight_b: floa
             ids = None if p.src.object_id is None else np.asarray(p.src.object_id, dtype=np.float32).copy()
             return (np.asarray(p.src.rgb, dtype=np.float32).copy(), np.asarray(p.src.depth_z, np.float32).copy(),
                     ids, _no_disagreement(camera, noise_y is not None))
-    if emission is not None and (a.src.emission is None or b.src.emission is None):
-        raise ValueError("a target emission pass needs the emission of both sources")
     if emission is None and (a.emits or b.emits):
         raise ValueError("sources that show directly seen emission need the target's emission pass")
     if geometry is None:

@@ -66,6 +66,8 @@ class WarpedFrames(NamedTuple):
     geometry_s: float  # wall time of those passes, s
     n_blocks: int  # blocks rendered into synthesized keyframes
     blocks_s: float  # wall time of those block renders, s
+    emission_keyframes: list  # keyframes given an emission pass (emitter in view, or a target between such)
+    probe_emission: bool  # whether the noise probe got one too
 
 
 def warp_key(base_key: dict, warp: dict) -> dict:
@@ -161,9 +163,15 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         objects = object_poses(ts, float(times[i]))
         return tuple(objects[k] for k in object_names)
 
-    def emission(i: int, pass_seed: int) -> np.ndarray | None:
-        """Directly visible emission of keyframe ``i`` (the pose must be set), or None without the layer."""
-        return ms.render_emission(pass_seed) if with_emission else None
+    emitting = set()  # rendered keyframes that show an emitter (each got an emission pass)
+
+    def emission(i: int) -> np.ndarray | None:
+        """Directly visible emission of rendered keyframe ``i`` (the pose must be set): None without the layer, or
+        where a 1-spp pass sees no emitter (then its radiance is all reflected light, warped as it is)."""
+        if not with_emission or not ms.emitter_in_view(seed):
+            return None
+        emitting.add(i)
+        return ms.render_emission(seed)
 
     def render(i: int) -> WarpSource:
         names[i] = render_names[i]
@@ -176,7 +184,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
             if with_emission:  # not stored: a fifteenth of a render, and the keyframe file stays a linear one
                 ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
             return WarpSource(data["rgb"], data["z"], cam_poses[i], data.get("object_id"), poses_of(i),
-                              emission(i, seed))
+                              emission(i))
         tic = time.perf_counter()
         ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
         rgb = ms.render_radiance(seed)
@@ -184,7 +192,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         write_frame(path, rgb, depth, object_id)
         frame_times.append(time.perf_counter() - tic)
         compiled.append(counter.take())
-        return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i), emission(i, seed))
+        return WarpSource(rgb, depth, cam_poses[i], object_id, poses_of(i), emission(i))
 
     def geometry(i: int) -> tuple:
         """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance)."""
@@ -206,6 +214,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
 
     tic = time.perf_counter()
     noise_y, noise = None, 0.0
+    probe_emission = False  # the noise map needed the probe's emission pass (keyframe 0 shows an emitter)
     if len(times) > 2:
         if first == 0:
             ready[0] = render(0)
@@ -214,10 +223,13 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
             key0 = read_exr(out_dir / render_names[0])["rgb"]
         render_noise_probe(ms, ts, plan, out_dir)
         probe = read_exr(out_dir / noise_probe_name(plan))["rgb"]
-        if with_emission:  # the warps move reflected light only: judge them against its noise
+        if with_emission:
             ms.set_pose(cam_poses[0], object_poses(ts, float(times[0])))
-            key0 = np.maximum(key0 - (ready[0].emission if first == 0 else emission(0, seed)), 0.0)
-            probe = np.maximum(probe - emission(0, seed + 1), 0.0)
+            key0_emission = ready[0].emission if first == 0 else emission(0)
+            if key0_emission is not None:  # the warps move reflected light only: judge them against its noise
+                probe_emission = True
+                key0 = np.maximum(key0 - key0_emission, 0.0)
+                probe = np.maximum(probe - ms.render_emission(seed + 1), 0.0)
         noise_y, noise = noise_map(key0, probe)
     patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed,
                            lambda i: (out_dir / warp_names[i]).is_file())
@@ -226,7 +238,8 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
                                 emission=target_emission if with_emission else None,
                                 on_keyframe=lambda i: bar.update(1), patch=patcher, anchors=anchors)
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
-                        noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks, patcher.seconds)
+                        noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks, patcher.seconds,
+                        sorted(emitting | plan.emission_passes), probe_emission)
 
 
 def chunk_result(done: WarpedFrames, lo: int, hi: int) -> dict:
@@ -238,7 +251,7 @@ def chunk_result(done: WarpedFrames, lo: int, hi: int) -> dict:
             "holes": {int(i): d.hole_fraction for i, d in plan.disagreement.items()},
             "patched": {int(i): list(v) for i, v in plan.patched.items()},
             "noise": done.noise, "n_geometry": done.n_geometry, "n_blocks": done.n_blocks,
-            "n_emission_targets": len(plan.emission_passes)}
+            "emission_keyframes": [int(i) for i in done.emission_keyframes], "probe_emission": done.probe_emission}
 
 
 def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) -> tuple[list, list, dict]:
@@ -246,7 +259,8 @@ def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) ->
     chunks' :func:`chunk_result` (any order) and the plan's warp ``settings`` (:attr:`RenderPlan.warp`)."""
     names, sources = [None] * n_keyframes, [None] * n_keyframes
     scores, holes, patched = {}, {}, {}
-    n_geometry = n_blocks = n_emission_targets = 0
+    n_geometry = n_blocks = 0
+    emission_keyframes, probe_emission = set(), False
     noise = 0.0
     for c in sorted(chunks, key=lambda c: c["lo"]):
         names[c["lo"]:c["hi"] + 1] = c["names"]
@@ -256,15 +270,16 @@ def merge_chunk_results(n_keyframes: int, chunks: list[dict], settings: dict) ->
         patched.update({int(k): tuple(v) for k, v in c["patched"].items()})
         n_geometry += c["n_geometry"]
         n_blocks += c["n_blocks"]
-        n_emission_targets += c.get("n_emission_targets", 0)
+        emission_keyframes.update(c.get("emission_keyframes", ()))
+        probe_emission |= bool(c.get("probe_emission", False))
         noise = c["noise"]
     if any(n is None for n in names):
         raise ValueError("the chunks do not cover every keyframe")
     layer = bool(settings.get("emission_layer", False))
-    # With the layer every rendered keyframe has an emission pass (to subtract), and so does the noise probe;
-    # synthesized ones have theirs (to add) where a source shows emission. Counted from what each keyframe needed,
-    # so the timeline does not depend on how the render was chunked (a chunk re-renders its first anchor's).
-    n_emission = sources.count("render") + 1 + n_emission_targets if layer else 0
+    # Keyframes given an emission pass: rendered ones that show an emitter (to subtract), synthesized ones between
+    # such (to add), and the noise probe when keyframe 0 shows one. Counted per keyframe (a union over chunks), so
+    # the timeline does not depend on how the render was chunked (a chunk re-renders its first anchor's pass).
+    n_emission = len(emission_keyframes) + int(probe_emission)
     warp = {"stride": settings["stride"], "threshold": settings["threshold"], "emission_layer": layer,
             "render_noise": noise, "n_geometry_passes": n_geometry, "n_emission_passes": n_emission,
             "n_block_renders": n_blocks,

@@ -158,8 +158,8 @@ def test_the_emission_layer_renders_emitters_and_warps_only_reflected_light():
     # The disagreement is that of the reflected light: the emitter's resampling error no longer counts.
     _, _, _, dis_reflected = synthesize(CAM, prepare(_source(a)), prepare(_source(b)), 0.5, mid)
     assert dis.hole_fraction == dis_reflected.hole_fraction
-    with pytest.raises(ValueError, match="emission of both sources"):
-        synthesize(CAM, prepare(_source(a)), prepare(source(b, True)), 0.5, mid, emission=_emission(mid))
+    with pytest.raises(ValueError, match="need the target's emission pass"):
+        synthesize(CAM, prepare(_source(a)), prepare(source(b, True)), 0.5, mid)
 
 
 def test_a_rendered_target_geometry_puts_moving_silhouettes_right():
@@ -273,12 +273,11 @@ def test_warp_render_directory_marks_sources_and_matches_the_linear_render(tmp_p
     assert sources[0] == sources[-1] == "render" and "warp" in sources
     assert warp.n_warped == sources.count("warp") and warp.n_rendered == sources.count("render")
     assert meta["schedule"]["interpolation"] == "warp" and meta["schedule"]["n_rendered_keyframes"] < len(sources)
-    # The emission layer is on by default. This scene shows no emitter (the plane fills the view): every rendered
-    # keyframe and the noise probe get an emission pass, all zero, so no synthesized keyframe needs one, and the
-    # keyframes are those of a warp without the layer, pixel for pixel.
+    # The emission layer is on by default. This scene shows no emitter (the plane fills the view): no keyframe
+    # needs an emission pass, and the keyframes are those of a warp without the layer, pixel for pixel.
     warp_meta = meta["schedule"]["warp"]
     assert warp_meta["emission_layer"] is True
-    assert warp_meta["n_emission_passes"] == sources.count("render") + 1
+    assert warp_meta["n_emission_passes"] == 0
     render_sequence(folder, ts, RenderSettings(duration_s=0.03, resolution=(32, 24), spp=16, warp_stride=8,
                                                interpolation="warp", warp_emission=False),
                     out_dir=tmp_path / "plain", progress=False)
@@ -325,6 +324,9 @@ def test_emission_pass_is_exactly_the_directly_seen_part_of_a_render(tmp_path, _
     rest = full - emission
     assert rest.min() > -1e-6 * full.max(), rest.min()
     assert (full - ms.render_emission(4)).min() < -1e-3 * full.max()
+    # A 1-spp pass tells whether any emitter is in view (the window here; none where a plane fills the view).
+    assert ms.emitter_in_view(3)
+    assert not load_scene(_pan_scene(tmp_path / "pan"), None, 32, 24, 1).ms.emitter_in_view(3)
     # A path integrator that hides its emitters has no such part to split off.
     (tmp_path / "s").mkdir()
     (tmp_path / "s" / "scene.xml").write_text("""<scene version="3.0.0">
@@ -347,7 +349,7 @@ def test_warp_renders_each_keyframes_emission_where_the_sources_show_some(tmp_pa
     meta = json.loads((tmp_path / "w" / "timeline.json").read_text())
     sources = [kf["source"] for kf in meta["keyframes"]]
     assert "warp" in sources
-    assert meta["schedule"]["warp"]["n_emission_passes"] >= len(sources) + 1
+    assert meta["schedule"]["warp"]["n_emission_passes"] == len(sources) + 1  # and the noise probe
     render_sequence("office", None, RenderSettings(duration_s=0.012, resolution=(32, 24), spp=4,
                                                    interpolation="linear"), out_dir=tmp_path / "l", progress=False)
     tw, tp, tl = (Timeline.open(tmp_path / d) for d in ("w", "p", "l"))
