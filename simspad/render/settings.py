@@ -18,28 +18,17 @@ from simspad.render.warp_schedule import WARP_STRIDE, WARP_THRESHOLD
 
 #: Keyframe interpolation modes: synthesize between sparse renders by reprojection, or render every keyframe.
 INTERPOLATIONS = ("warp", "linear")
-#: Default interpolation. "linear" until warp synthesis meets its bar (≥ 8× fewer renders, error no larger, event
-#: counts within 2 % of an all-render timeline) on every built-in scene. Measured (benchmarks/bench_warp.py, 16 spp,
-#: render counts include the noise probe and the blocks rendered into synthesized keyframes, in whole renders):
-#: - 64×48 over 192 ms (whole-keyframe bisection only): piano 12.9×, star 6.4×, fan 4.8×, office 2.8×, plant 2.6×
-#:   fewer renders at 0.96–1.05× linear's error.
-#: - 128×96 over 96 ms, blocks rendered where the warps disagree as long as they cost ≤ 1 render per segment: office
-#:   3.9× (without blocks 1.6×) at 1.02× linear's error, plant 1.6× at 0.98×. With blocks wherever they cost ≤ ¼
-#:   render per keyframe (no segment bound) the office reached 4.1× but at 1.09× linear's error, and the fan, star
-#:   and office made 9–16 % more events (a block's frozen noise pattern differs from a whole render's, and
-#:   switches at each segment's ends).
-#: - Events: on camera-motion scenes at 16 spp the all-render timeline's own events are mostly Monte Carlo noise
-#:   (under camera motion the fixed-seed noise does not stay frozen: plant 3344 ON at 16 spp, 1744 at 64, 1028 at
-#:   256); warp's blend of two renders makes fewer such events (and matched the all-render count within 0.1 % at
-#:   256 spp).
-#: - Wall time: at these sizes a block's render call costs 0.05–0.15 s beyond its samples (tracing and launching
-#:   the integrator), so blocks are costed with it (:data:`simspad.render.blocks.BLOCK_CALL_SAMPLES`); at 512²
-#:   and 64 spp, where one office keyframe costs ≈ 60 CPU-s, that is well under 1 %.
-#: The office is bounded by its window (a textured emitter 40× brighter than the room, behind thin mullions):
-#: 99.5 % of a warp's squared error, above the noise test even between neighbouring keyframes. At 512×512 (office,
-#: 24 ms) warp renders 2.1× fewer keyframes at 1.007× linear's error but makes +30 % ON / +26 % OFF events: the
-#: frozen noise it moves with the content (docs/rendering.md, with what was tried against it). Opt in with
-#: ``--interpolation warp`` (``interpolation = "warp"`` in a dataset spec).
+#: Default interpolation. "linear" until warp synthesis meets its bar (≥ 8× less render work, error no larger,
+#: event counts within 2 % of an all-render timeline) on every built-in scene. Measured at 64 spp, 256×192 over
+#: 48 ms (benchmarks/bench_warp.py; render work counts every pass at its measured price, in whole renders): piano
+#: 3.6× less at linear's error and events, plant 1.8× (with the emission layer; 1.0× without), office 2.5× but
+#: +7.9 % ON / +6.7 % OFF events (2.0× without the layer, events within 2 %), fan 1.6×, Siemens star 1.0× (the
+#: warps do not follow their rotation). At 512² the office gets 2.8× at 1.00× linear's error and +11.8 % / +7.4 %
+#: events. What keeps warp from the bar: moving noise (a warp carries a rendered keyframe's frozen Monte Carlo
+#: noise along with the content, and in the office's noisy room that makes events), fast rotation, and the emission
+#: pass each synthesized keyframe pays where an emitter is in view (7 % of an office render, capping it at ≈ 7×);
+#: docs/rendering.md has every figure and what was tried. Opt in with ``--interpolation warp``
+#: (``interpolation = "warp"`` in a dataset spec).
 DEFAULT_INTERPOLATION = "linear"
 
 
