@@ -6,7 +6,10 @@ and writes the synthesized ones (:mod:`simspad.render.warp`) as ordinary keyfram
 (same EXR layout: R, G, B, Z, and ``object_id`` when the scene animates objects). Rendered keyframes keep the
 names (cache keys) of a linear render, so both schedules share them; synthesized ones are keyed by the same
 fields plus the synthesis version and parameters. Where the warps disagree in places, :class:`BlockPatcher`
-renders those blocks (:mod:`simspad.render.blocks`) into the synthesized keyframes.
+renders those blocks (:mod:`simspad.render.blocks`) into the synthesized keyframes. With the emission layer
+(``emission_layer`` in the plan's warp settings), a rendered keyframe with an emitter in view gets an emission pass
+(:meth:`~simspad.render.mitsuba_scene.MitsubaScene.render_emission`, not stored), only its reflected light is
+warped, and a keyframe synthesized next to such a one gets its own emission pass added.
 
 The render noise the warps are judged against comes from keyframe 0 and one *noise probe* (keyframe 0 again with
 the next seed, kept in the render directory). ``simspad generate`` spreads a warp render over its workers in two
@@ -181,7 +184,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         if path.is_file():
             reused[0] += 1
             data = read_exr(path)
-            if with_emission:  # not stored: a fifteenth of a render, and the keyframe file stays a linear one
+            if with_emission:  # the emission pass is not stored: the keyframe file stays a linear render's
                 ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
             return WarpSource(data["rgb"], data["z"], cam_poses[i], data.get("object_id"), poses_of(i),
                               emission(i))
