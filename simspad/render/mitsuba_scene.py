@@ -257,14 +257,9 @@ class MitsubaScene:
         slip between the samples; True when the variant cannot name shapes (scalar)."""
         if self._emitter_of_shape is None:
             return True
-        img = np.array(self.mi.render(self.scene, self.params, sensor=self.depth_sensor,
-                                      integrator=self.depth_id_integrator, seed=seed, spp=DEPTH_SPP),
-                       dtype=np.float32)
-        ray, shape = img[..., 0], np.rint(img[..., 1]).astype(np.int64)
-        table = self._emitter_of_shape
+        ray, shape = self._depth_shape_pass(seed)
         hit = ray > 0
-        known = hit & (shape >= 0) & (shape < table.size)
-        if np.any(table[np.clip(shape[known], 0, table.size - 1)]):
+        if np.any(_lookup(self._emitter_of_shape, shape, hit)):
             return True
         return bool(self.scene.environment() is not None and np.any(~hit))
 
@@ -349,15 +344,21 @@ class MitsubaScene:
         scene has no animated object or the variant cannot name shapes), from one AOV pass."""
         if self._object_id_of_shape is None:
             return self.render_depth(seed), None
+        ray, shape = self._depth_shape_pass(seed)
+        return self._z_from_ray(ray), _lookup(self._object_id_of_shape, shape, ray > 0).astype(np.float32)
+
+    def _depth_shape_pass(self, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """One 1-spp AOV pass: ray depth from the near-clip plane (0: no hit) and ``shape_index`` (int64)."""
         img = np.array(self.mi.render(self.scene, self.params, sensor=self.depth_sensor,
                                       integrator=self.depth_id_integrator, seed=seed, spp=DEPTH_SPP),
                        dtype=np.float32)
-        ray, shape = img[..., 0], np.rint(img[..., 1]).astype(np.int64)
-        hit = ray > 0
-        table = self._object_id_of_shape
-        known = hit & (shape >= 0) & (shape < table.size)
-        ids = np.where(known, table[np.clip(shape, 0, table.size - 1)], 0)
-        return self._z_from_ray(ray), ids.astype(np.float32)
+        return img[..., 0], np.rint(img[..., 1]).astype(np.int64)
+
+
+def _lookup(table: np.ndarray, shape_index: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """``table[shape_index]`` where a ray hit a shape the table knows, the table's zero elsewhere."""
+    known = hit & (shape_index >= 0) & (shape_index < table.size)
+    return np.where(known, table[np.clip(shape_index, 0, table.size - 1)], table.dtype.type(0))
 
 
 def psf_blur(rgb: np.ndarray) -> np.ndarray:

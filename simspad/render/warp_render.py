@@ -162,6 +162,10 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
     first = 0 if anchors is None else anchors[0]
     ready: dict = {}  # keyframe 0, when rendered or read for the noise map before the schedule asks for it
 
+    def pose_at(i: int) -> tuple:
+        """Camera-to-world and object poses (by name) of keyframe ``i``, as :meth:`MitsubaScene.set_pose` takes them."""
+        return cam_poses[i], object_poses(ts, float(times[i]))
+
     def poses_of(i: int) -> tuple:
         objects = object_poses(ts, float(times[i]))
         return tuple(objects[k] for k in object_names)
@@ -185,11 +189,11 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
             reused[0] += 1
             data = read_exr(path)
             if with_emission:  # the emission pass is not stored: the keyframe file stays a linear render's
-                ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+                ms.set_pose(*pose_at(i))
             return WarpSource(data["rgb"], data["z"], cam_poses[i], data.get("object_id"), poses_of(i),
                               emission(i))
         tic = time.perf_counter()
-        ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+        ms.set_pose(*pose_at(i))
         rgb = ms.render_radiance(seed)
         depth, object_id = ms.render_depth_ids(seed)
         write_frame(path, rgb, depth, object_id)
@@ -200,14 +204,14 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
     def geometry(i: int) -> tuple:
         """Depth and ids of keyframe ``i`` from a geometry pass (1 spp; the same seed as its radiance)."""
         tic = time.perf_counter()
-        ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+        ms.set_pose(*pose_at(i))
         depth, object_id = ms.render_depth_ids(seed)
         geometry_times.append(time.perf_counter() - tic)
         return depth, object_id
 
     def target_emission(i: int) -> np.ndarray:
         """Directly visible emission of keyframe ``i`` (the same seed as its radiance)."""
-        ms.set_pose(cam_poses[i], object_poses(ts, float(times[i])))
+        ms.set_pose(*pose_at(i))
         return ms.render_emission(seed)
 
     def write(i: int, rgb, depth, object_id) -> None:
@@ -227,14 +231,14 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         render_noise_probe(ms, ts, plan, out_dir)
         probe = read_exr(out_dir / noise_probe_name(plan))["rgb"]
         if with_emission:
-            ms.set_pose(cam_poses[0], object_poses(ts, float(times[0])))
+            ms.set_pose(*pose_at(0))
             key0_emission = ready[0].emission if first == 0 else emission(0)
             if key0_emission is not None:  # the warps move reflected light only: judge them against its noise
                 probe_emission = True
                 key0 = np.maximum(key0 - key0_emission, 0.0)
                 probe = np.maximum(probe - ms.render_emission(seed + 1), 0.0)
         noise_y, noise = noise_map(key0, probe)
-    patcher = BlockPatcher(ms, lambda i: (cam_poses[i], object_poses(ts, float(times[i]))), seed,
+    patcher = BlockPatcher(ms, pose_at, seed,
                            lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,

@@ -294,6 +294,6 @@ class RecordingWriter:
                 ds.attrs[key] = _attr_value(value)
             return ds
 
-        appender = Appender(name, create, chunk_rows, tail_shape, dtype, presized=bool(n_rows))
+        appender = Appender(name, create, chunk_rows, tail_shape, dtype, presized=n_rows is not None)
         self._appenders.append(appender)
         return appender
