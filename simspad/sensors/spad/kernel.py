@@ -23,7 +23,11 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
   four pixels per 64-bit draw. A row's dense bytes are drawn in one vectorised loop (SplitMix64 draws addressed
   by counter), and the start of each linear piece sets z for the whole row with an inlined exponential
   (:mod:`simspad.physics.vector_exp`). A run of a single bin (a gate straddling a keyframe) computes no per-bin
-  factor. A bit-sliced alternative (one 64-bit draw gives the next bit of 64 pixels' uniforms, and the leading
+  factor. That set-up works in the sampler's own [bit, byte] layout, on the dense bytes only: each row's dark term
+  and keyframe values are transposed into it once, instead of Λ being computed for the whole row in pixel order
+  and scattered into the layout at every run (the same operations per pixel, so the same bits; kernel alone, min
+  of 7 calls of 512 bins, median of 5 alternating processes: 84.4 → 77.5 ms at mean P(1) = 0.05, 151 → 146 at
+  0.9). A bit-sliced alternative (one 64-bit draw gives the next bit of 64 pixels' uniforms, and the leading
   bits that every z of a block shares decide most pixels at once, the rest by their own slice) was measured
   against this sampler on the scene of benchmarks/bench_spad.py: equal per 64 pixels at mean P(1) = 0.05
   (≈ 60 ns; the undecided pixels cost a data-dependent branch each), 2.5× slower at 0.3 (no faster with a
@@ -289,8 +293,14 @@ def spad_chunk(out, events, layout, response, seed):
     byte_candidates = np.empty(Wb, np.float64)  # per byte of the row: expected sparse candidates per bin
     row_hi = np.empty(W, np.float32)
     row_lo = np.empty(W, np.float32)
-    lam_row = np.empty(W, np.float64)
-    slope_row = np.empty(W, np.float64)
+    # the dense bytes' pixels transposed to [bit, i] (bit b of the row's i-th dense byte), once per row: the dark
+    # term and each keyframe of the call (0 past the right edge: z = 1 there, never a detection nor a tie)
+    n_keys = len(slots)
+    slot_pos = np.zeros(images.shape[0], np.int64)  # slot of images -> its keyframe's place in slots
+    for j in range(n_keys):
+        slot_pos[slots[j]] = j
+    dark_t = np.empty((8, Wb), np.float64)
+    img_t = np.empty((n_keys, 8, Wb), np.float64)
     bin_run = layout.bin_run
     # the sparse sampler's exact Λ (thinning) from a per-row table of each run's a + b·dk, when the call has few
     # runs (keyframes far apart); with a run every few bins the table would cost more than it saves
@@ -431,43 +441,51 @@ def spad_chunk(out, events, layout, response, seed):
                         countdown = (ap_left - 1, ct_left - 4)
         # the dense bytes, bin by bin: 4 pixels per 64-bit draw, the draws of a bin addressed by counter
         # (state + j·γ), so the loop over bytes vectorises
+        if n_dense > 0:
+            for bit in range(8):
+                for i in range(n_dense):
+                    x = 8 * dense_b[i] + bit
+                    dark_t[bit, i] = float(dcr[y, x]) * gate_s if x < W else 0.0
+            for j in range(n_keys):
+                s_j = slots[j]
+                for bit in range(8):
+                    for i in range(n_dense):
+                        x = 8 * dense_b[i] + bit
+                        img_t[j, bit, i] = float(images[s_j, y, x]) if x < W else 0.0
         for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
-                # Λ and its slope for the whole row, term by term over contiguous pixels (vectorised)
+                # Λ and its slope for the dense pixels, term by term in the transposed layout (vectorised); the
+                # same operations in the same order per pixel as a pixel-order loop, so the same values
                 dk = float(k - layout.run_k0[r])
-                for x in range(W):
-                    lam_row[x] = float(dcr[y, x]) * gate_s
-                    slope_row[x] = 0.0
+                for bit in range(8):
+                    for i in range(n_dense):
+                        t16[bit, i] = dark_t[bit, i]
+                        f16[bit, i] = 0.0
                 for term in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
                     c = layout.term_c[term] + dk * layout.term_dc[term]
                     dc = layout.term_dc[term]
-                    img = layout.term_img[term]
-                    for x in range(W):
-                        v = float(images[img, y, x])
-                        lam_row[x] += c * v
-                        slope_row[x] += dc * v
-                # z·2¹⁶ and the per-bin factor for the whole row (an inlined exponential: the loop vectorises); a
-                # run of one bin (a gate straddling a keyframe: about every other run when keyframes are 1 ms
-                # apart) needs no factor, and its exponentials are half the set-up
-                one_bin = (layout.run_k0[r + 1] if r + 1 < n_runs else m) == k + 1
-                for x in range(W):
-                    lam_row[x] = _TWO16 * exp_fast(-max(lam_row[x], 0.0))
-                if one_bin:
-                    slope_row[:W] = 1.0
-                else:
-                    for x in range(W):
-                        slope_row[x] = exp_fast(-slope_row[x])
-                for i in range(n_dense):
+                    j = slot_pos[layout.term_img[term]]
                     for bit in range(8):
-                        x = 8 * dense_b[i] + bit
-                        t = _TWO16  # z = 1 past the right edge: never a detection (and never a tie)
-                        f = 1.0
-                        if x < W:
-                            t = lam_row[x]
-                            f = slope_row[x]
-                        t16[bit, i] = t
-                        f16[bit, i] = f
+                        for i in range(n_dense):
+                            v = img_t[j, bit, i]
+                            t16[bit, i] += c * v
+                            f16[bit, i] += dc * v
+                # z·2¹⁶ and the per-bin factor (an inlined exponential: the loop vectorises); a run of one bin (a
+                # gate straddling a keyframe: about every other run when keyframes are 1 ms apart) needs no
+                # factor, and its exponentials are half the set-up
+                one_bin = (layout.run_k0[r + 1] if r + 1 < n_runs else m) == k + 1
+                for bit in range(8):
+                    for i in range(n_dense):
+                        t16[bit, i] = _TWO16 * exp_fast(-max(t16[bit, i], 0.0))
+                if one_bin:
+                    for bit in range(8):
+                        for i in range(n_dense):
+                            f16[bit, i] = 1.0
+                else:
+                    for bit in range(8):
+                        for i in range(n_dense):
+                            f16[bit, i] = exp_fast(-f16[bit, i])
             total, ties = dense_bits(words0, words1, t16, hits, n_dense, state)
             state_bin = state
             state += np.uint64(2 * n_dense) * GOLDEN_GAMMA
