@@ -22,38 +22,18 @@ import os
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from simspad.dataset.executors import LocalExecutor, job_environment  # noqa: E402
+from simspad.dataset.plan import RenderTask  # noqa: E402
+from simspad.dataset.spec import SequenceSpec  # noqa: E402
 from simspad.dataset.task_queue import Job, TaskQueue  # noqa: E402
 from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks  # noqa: E402
 from simspad.render.renderer import finalize_render  # noqa: E402
 from simspad.render.settings import RenderSettings  # noqa: E402
-
-
-@dataclass(frozen=True)
-class _Sequence:  # the fields of a spec sequence that the render tasks read
-    name: str
-    scene: str
-    trajectory: object
-    duration_s: float
-    start_s: float
-    resolution: tuple
-    spp: int
-    max_flow_px: float
-    min_rate_hz: float
-
-
-@dataclass(frozen=True)
-class _RenderTask:
-    sequence: _Sequence
-    render_hash: str
-    rel_dir: str
-    seed: int
 
 
 def render_with(task, out: Path, workers: int) -> tuple[float, int, float, float]:
@@ -100,9 +80,12 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     args = ap.parse_args(argv)
     defaults = RenderSettings(duration_s=args.duration)
-    seq = _Sequence("bench", args.scene, None, args.duration, 0.0, tuple(args.resolution), args.spp,
-                    defaults.max_flow_px, defaults.min_rate_hz)
-    task = _RenderTask(seq, "0" * 64, "renders/bench", 1)
+    # the real task types, as `simspad generate` builds them (stand-ins drifted from them once: a field the
+    # workers read was missing)
+    seq = SequenceSpec(name="bench", scene=args.scene, trajectory=None, duration_s=args.duration, start_s=0.0,
+                       resolution=tuple(args.resolution), spp=args.spp, max_flow_px=defaults.max_flow_px,
+                       min_rate_hz=defaults.min_rate_hz)
+    task = RenderTask(seq, "0" * 64, "renders/bench", 1)
     print(f"one sequence: {args.scene}, {args.resolution[0]}×{args.resolution[1]} px, {args.spp} spp, "
           f"{args.duration * 1e3:g} ms; {os.cpu_count()} cores")
     base_s, base_digest = None, None
