@@ -13,7 +13,6 @@ import json
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -77,7 +76,6 @@ def main() -> None:
         print(f"{'events':>10} {'format':>6} {'stream MiB':>11} {'reference MiB':>14} {'ratio':>6} {'time ratio':>11}")
         for n in sizes:
             rec = tmp / f"rec_{n}.h5"
-            t0 = time.perf_counter()
             write_events(rec, n)
             for fmt, suffix in (("dsec", ".h5"), ("evt3", ".raw")):
                 s = run("stream", fmt, rec, tmp / f"s{suffix}")
