@@ -72,20 +72,20 @@ def subset(dataset: Path, n: int, dest: Path) -> list[Path]:
     return chosen
 
 
-def failed_runs(results_csv: Path) -> list[str]:
-    """``method/recording: error`` of every row of a results.csv whose ``error`` column is set."""
+def read_rows(results_csv: Path) -> list[dict]:
+    """The rows of a results.csv."""
     with open(results_csv, newline="", encoding="utf-8") as f:
-        return [f"{r.get('method')}/{r.get('recording')}: {r['error'][:120]}" for r in csv.DictReader(f)
-                if r.get("error")]
+        return list(csv.DictReader(f))
 
 
-def compare(a: Path, b: Path) -> str:
-    """Whether two results.csv agree on the columns both have, ``runtime_s`` aside; where they do not, the
+def failed_runs(rows: list[dict]) -> list[str]:
+    """``method/recording: error`` of every results row whose ``error`` column is set."""
+    return [f"{r.get('method')}/{r.get('recording')}: {r['error'][:120]}" for r in rows if r.get("error")]
+
+
+def compare(ra: list[dict], rb: list[dict]) -> str:
+    """Whether two results tables agree on the columns both have, ``runtime_s`` aside; where they do not, the
     largest difference of PSNR (dB) and the columns that differ."""
-    def rows(p):
-        with open(p, newline="", encoding="utf-8") as f:
-            return list(csv.DictReader(f))
-    ra, rb = rows(a), rows(b)
     # image: the path of the comparison image, whose folder gained the speed suffix after the baseline (its two
     # speeds of a sequence shared a folder); runtime_s and mtf50_cyc_px as before
     skip = ("runtime_s", "mtf50_cyc_px", "image")
@@ -140,13 +140,14 @@ def main() -> None:
             if name == "today":
                 print(out[out.find("timings"):].rstrip())
         (bw, bc), (tw, tc) = results["baseline"], results["today"]
-        failed = {name: failed_runs(tmp / f"out_{name}" / "results.csv") for name in results}
+        rows = {name: read_rows(tmp / f"out_{name}" / "results.csv") for name in results}
+        failed = {name: failed_runs(r) for name, r in rows.items()}
         if any(failed.values()):
             print("speed-up   not comparable: method runs that failed (the two did different work): " +
                   "; ".join(f"{name} {len(f)} ({f[0]})" for name, f in failed.items() if f))
         else:
             print(f"speed-up   wall {bw / tw:5.2f}x   CPU {bc / tc:5.2f}x")
-        print("results:", compare(tmp / "out_baseline" / "results.csv", tmp / "out_today" / "results.csv"))
+        print("results:", compare(rows["baseline"], rows["today"]))
 
         rec = str(chosen[0])
         env = dict(os.environ, PYTHONPATH=str(REPO), NUMBA_CACHE_DIR=str(tmp / "numba_fresh"))

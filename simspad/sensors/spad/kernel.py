@@ -294,13 +294,9 @@ def spad_chunk(out, events, layout, response, seed):
     row_hi = np.empty(W, np.float32)
     row_lo = np.empty(W, np.float32)
     # the dense bytes' pixels transposed to [bit, i] (bit b of the row's i-th dense byte), once per row: the dark
-    # term and each keyframe of the call (0 past the right edge: z = 1 there, never a detection nor a tie)
-    n_keys = len(slots)
-    slot_pos = np.zeros(images.shape[0], np.int64)  # slot of images -> its keyframe's place in slots
-    for j in range(n_keys):
-        slot_pos[slots[j]] = j
+    # term and each keyframe slot the call uses (0 past the right edge: z = 1 there, never a detection nor a tie)
     dark_t = np.empty((8, Wb), np.float64)
-    img_t = np.empty((n_keys, 8, Wb), np.float64)
+    img_t = np.empty((images.shape[0], 8, Wb), np.float64)
     bin_run = layout.bin_run
     # the sparse sampler's exact Λ (thinning) from a per-row table of each run's a + b·dk, when the call has few
     # runs (keyframes far apart); with a run every few bins the table would cost more than it saves
@@ -446,12 +442,12 @@ def spad_chunk(out, events, layout, response, seed):
                 for i in range(n_dense):
                     x = 8 * dense_b[i] + bit
                     dark_t[bit, i] = float(dcr[y, x]) * gate_s if x < W else 0.0
-            for j in range(n_keys):
-                s_j = slots[j]
+            for j in range(len(slots)):
+                slot = slots[j]
                 for bit in range(8):
                     for i in range(n_dense):
                         x = 8 * dense_b[i] + bit
-                        img_t[j, bit, i] = float(images[s_j, y, x]) if x < W else 0.0
+                        img_t[slot, bit, i] = float(images[slot, y, x]) if x < W else 0.0
         for k in range(m if n_dense > 0 else 0):
             r = bin_run[k]
             if k == 0 or r != bin_run[k - 1]:  # a new run: exact Λ and its per-bin ratio
@@ -465,10 +461,10 @@ def spad_chunk(out, events, layout, response, seed):
                 for term in range(layout.term_ptr[r], layout.term_ptr[r + 1]):
                     c = layout.term_c[term] + dk * layout.term_dc[term]
                     dc = layout.term_dc[term]
-                    j = slot_pos[layout.term_img[term]]
+                    img = layout.term_img[term]
                     for bit in range(8):
                         for i in range(n_dense):
-                            v = img_t[j, bit, i]
+                            v = img_t[img, bit, i]
                             t16[bit, i] += c * v
                             f16[bit, i] += dc * v
                 # z·2¹⁶ and the per-bin factor (an inlined exponential: the loop vectorises); a run of one bin (a
