@@ -24,3 +24,22 @@ def test_bench_render_chunks_renders_one_sequence_on_one_and_two_workers_with_th
     lines = re.findall(r"(\d+) worker\(s\):.*for (\d+) keyframes.*bytes (\w+)", res.stdout)
     assert [(w, b) for w, _, b in lines] == [("1", "identical"), ("2", "identical")], res.stdout
     assert int(lines[0][1]) >= 2
+
+
+@pytest.mark.slow
+def test_bench_evaluate_times_both_revisions_and_each_methods_first_reconstruction(child_env, evaluation_dataset):
+    # The dataset is named relative to the working directory, as a user types it: the warm-up children run
+    # elsewhere, and once printed an empty list of first reconstructions ("no such recording file" went unread).
+    if subprocess.run(["git", "-C", str(BENCHMARKS.parent), "rev-parse", "HEAD"], capture_output=True).returncode:
+        pytest.skip("not a git checkout: the benchmark's baseline comes from git")
+    res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_evaluate.py"), evaluation_dataset.name,
+                          "--recordings", "0", "--baseline", "HEAD"],
+                         capture_output=True, text=True, timeout=600, env=child_env, cwd=evaluation_dataset.parent)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert re.search(r"speed-up +wall +[\d.]+x +CPU +[\d.]+x", res.stdout), res.stdout
+    assert "columns identical" in res.stdout, res.stdout
+    firsts = re.findall(r"fresh process, .*: [\d.]+ s in all; first reconstruction: (.*)", res.stdout)
+    assert len(firsts) == 2, res.stdout
+    for listed in firsts:
+        methods = dict(re.findall(r"(\w+) ([\d.]+)s", listed))
+        assert {"ni", "qbp"} <= methods.keys(), res.stdout  # the SPAD-only methods (these recordings have no events)
