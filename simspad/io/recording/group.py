@@ -28,6 +28,9 @@ class GroupView:
         self._path = path
         self._name = name
         self._attrs: dict | None = None
+        # Datasets stay open while the recording is: HDF5 keeps decoded chunks in a cache per open dataset, so
+        # methods reading a compressed stream block by block decode each chunk once, not once per read.
+        self._datasets: dict[str, h5py.Dataset] = {}
 
     @property
     def attrs(self) -> dict:
@@ -39,11 +42,16 @@ class GroupView:
 
     def _dataset(self, name: str) -> h5py.Dataset:
         """The dataset ``<group>/<name>``; InputError naming it when the recording lacks it."""
+        dataset = self._datasets.get(name)
+        if dataset is not None:
+            return dataset
         full = f"{self._name}/{name}"
         try:
-            return self._h5[full]
+            dataset = self._h5[full]
         except KeyError:
             raise InputError("dataset missing from the recording", path=self._path, field=full) from None
+        self._datasets[name] = dataset
+        return dataset
 
     def _optional(self, name: str):
         """The whole dataset ``<group>/<name>`` (None when the recording lacks it)."""
