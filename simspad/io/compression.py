@@ -24,3 +24,11 @@ SPAD_COMPRESSIONS: dict[str, dict] = {
     # smallest of the fast filters; needs the hdf5plugin filter to read
     "zstd": dict(hdf5plugin.Zstd(clevel=1)),
 }
+
+#: Storage of float32 image stacks that are outputs, not inputs (the reconstructions of a results directory):
+#: byte shuffle + Zstandard level 1. On the 240 reconstructions of the mini dataset's evaluation (80×60 px
+#: frames, one chunk each) it stores 0.75 of the raw bytes in 3.5 ms of CPU per file (written and read back),
+#: against LZF's 0.87 in 10.3 ms; unshuffled Zstandard 0.79 in 3.1 ms, gzip level 1 with shuffle 0.76 in 9.2 ms.
+#: LZF is slowest where it gains least: on noisy frames (the usual reconstruction) it compresses at ≈ 30 MB/s and
+#: keeps 0.97–0.99 of the bytes.
+FLOAT_FRAMES_STORAGE: dict = dict(shuffle=True, **hdf5plugin.Zstd(clevel=1))

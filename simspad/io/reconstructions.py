@@ -1,6 +1,7 @@
 """Saved reconstructions of a results directory: ``reconstructions/<rec>/<method>.h5``.
 
-Layout: ``/t`` [N] float64 s, ``/flux`` [N,H,W] float32 ph s⁻¹ m⁻² (one LZF-compressed chunk per frame), root
+Layout: ``/t`` [N] float64 s, ``/flux`` [N,H,W] float32 ph s⁻¹ m⁻² (one chunk per frame, byte shuffle + Zstandard:
+:data:`simspad.io.compression.FLOAT_FRAMES_STORAGE`; an outside reader imports ``hdf5plugin`` first), root
 attributes ``method``, ``recording``, ``units``. Frames are written as the method produces them, a few at a
 time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same).
 """
@@ -11,6 +12,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from simspad.io.compression import FLOAT_FRAMES_STORAGE
 
 #: Most bytes of frames held before they are written (memory does not grow with the sequence length).
 BUFFER_BYTES = 8 * 2**20
@@ -36,7 +39,7 @@ class ReconstructionSink:
         self.h5 = h5py.File(path, "w")
         self.h5.create_dataset("t", data=np.asarray(times_s, np.float64), track_times=False)
         self.ds = self.h5.create_dataset("flux", shape=(len(times_s), *shape), dtype=np.float32,
-                                         chunks=(1, *shape), compression="lzf", track_times=False)
+                                         chunks=(1, *shape), track_times=False, **FLOAT_FRAMES_STORAGE)
         for k, v in attrs.items():
             self.h5.attrs[k] = v
         frame_bytes = max(1, int(np.prod(shape)) * 4)
