@@ -33,7 +33,7 @@ def test_bench_evaluate_times_both_revisions_and_each_methods_first_reconstructi
     if subprocess.run(["git", "-C", str(BENCHMARKS.parent), "rev-parse", "HEAD"], capture_output=True).returncode:
         pytest.skip("not a git checkout: the benchmark's baseline comes from git")
     res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_evaluate.py"), evaluation_dataset.name,
-                          "--recordings", "0", "--baseline", "HEAD"],
+                          "--recordings", "0", "--baseline", "HEAD", "--rounds", "1"],
                          capture_output=True, text=True, timeout=600, env=child_env, cwd=evaluation_dataset.parent)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert re.search(r"speed-up +wall +[\d.]+x +CPU +[\d.]+x", res.stdout), res.stdout
