@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from simspad.methods import qbp_kernels as k
-from simspad.methods.qbp import estimate_block_flow
+from simspad.methods.qbp import TileMatches, TileSearch, estimate_block_flow, match_tiles
 
 # Bilinear sampling outside the image: SciPy 1.17 weights the clamped nodes by the unclamped coordinate, older
 # versions clamp the coordinate first; the two agree to rounding.
@@ -121,3 +121,54 @@ def test_block_flow_is_deterministic():
     a = estimate_block_flow(ref, img)
     b = estimate_block_flow(ref.copy(), img.copy())
     assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def _match_tiles_per_pixel(ref, img, tile, radius, init_dy, init_dx, l2):
+    """QBP's integer block matching as first written: every displacement of the window in turn, every pixel's
+    displaced sample tested against the image bounds, the first smallest cost kept, then the L2 costs at ±1."""
+    H, W = ref.shape
+
+    def cost(y0, y1, x0, x1, cy, cx, sq):
+        acc, cnt = 0.0, 0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                if 0 <= y + cy < H and 0 <= x + cx < W:
+                    d = img[y + cy, x + cx] - ref[y, x]
+                    acc += d * d if sq else abs(d)
+                    cnt += 1
+        return np.inf if 2 * cnt < (y1 - y0) * (x1 - x0) or cnt == 0 else acc / cnt
+
+    ny, nx = init_dy.shape
+    dy, dx = np.zeros((ny, nx), np.int64), np.zeros((ny, nx), np.int64)
+    cost_y, cost_x = np.zeros((ny, nx, 3)), np.zeros((ny, nx, 3))
+    for ty in range(ny):
+        for tx in range(nx):
+            y0, x0 = ty * tile, tx * tile
+            y1, x1 = min(y0 + tile, H), min(x0 + tile, W)
+            best, by, bx = np.inf, init_dy[ty, tx], init_dx[ty, tx]
+            for ddy in range(-radius, radius + 1):
+                for ddx in range(-radius, radius + 1):
+                    c = cost(y0, y1, x0, x1, init_dy[ty, tx] + ddy, init_dx[ty, tx] + ddx, l2)
+                    if c < best:
+                        best, by, bx = c, init_dy[ty, tx] + ddy, init_dx[ty, tx] + ddx
+            dy[ty, tx], dx[ty, tx] = by, bx
+            for j in range(3):
+                cost_y[ty, tx, j] = cost(y0, y1, x0, x1, by + j - 1, bx, True)
+                cost_x[ty, tx, j] = cost(y0, y1, x0, x1, by, bx + j - 1, True)
+    return dy, dx, cost_y, cost_x
+
+
+@pytest.mark.parametrize("radius, l2", [(4, False), (1, True), (2, True), (0, True)])
+def test_match_tiles_is_the_per_pixel_search_bit_for_bit(radius, l2):
+    rng = np.random.default_rng(radius)
+    ref = ndimage.gaussian_filter(rng.random((30, 37)), 1.5) * 100
+    img = np.roll(ref, (1, -2), axis=(0, 1)) + rng.normal(0, 1, ref.shape)
+    tile = 8
+    grid = (4, 5)  # the last row and column of tiles are partial; edge tiles search partly outside the image
+    init_dy = rng.integers(-3, 4, grid)
+    init_dx = rng.integers(-3, 4, grid)
+    got = TileMatches(np.zeros(grid, np.int64), np.zeros(grid, np.int64), np.zeros(grid + (3,)), np.zeros(grid + (3,)))
+    match_tiles(ref, img, TileSearch(tile, radius, init_dy, init_dx, l2), got)
+    want = _match_tiles_per_pixel(ref, img, tile, radius, init_dy, init_dx, l2)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
