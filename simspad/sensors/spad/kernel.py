@@ -45,7 +45,10 @@ candidate: 1.14–1.2× slower), per-run bounds of Λ for the squeeze, candidate
 their own) before thinning, a padded block (no cache-set aliasing between bins), and the dense set-up of each run
 computed for the dense bytes only instead of the whole row; and, for the dense sampler, advancing z inside
 :func:`~simspad.sensors.spad.dense_bits.dense_bits` (into a second buffer, so that ties still see the old z): its
-loop then no longer vectorises, 5–8× slower.
+loop then no longer vectorises, 5–8× slower; and 8-bit slices (one 64-bit draw per byte instead of two, a tie at
+probability 1/256 resolved from a per-byte tie mask): 85–88 ms against 73 per call at mean P(1) = 0.05, and no
+faster (74–78) even with the ties left unresolved. The draws do not bound the dense loop; its per-lane conversions
+and compares do.
 
 Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
 (in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
