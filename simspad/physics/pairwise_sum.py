@@ -13,7 +13,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def pairwise_block(a, lo, n):
     """NumPy's sum of ``a[lo:lo + n]`` for n ≤ 128: sequential below 8 values, else eight interleaved partial
     sums added as ((0 + 1) + (2 + 3)) + ((4 + 5) + (6 + 7)), then the remainder."""
