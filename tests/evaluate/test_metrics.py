@@ -49,6 +49,19 @@ def test_white_point_is_the_99th_percentile_and_streams_exactly():
     assert metrics.white_point(np.zeros((2, 3, 3))) == 1.0  # all dark: a usable fallback
 
 
+def test_order_statistic_narrows_down_to_ranges_a_few_ulps_wide():
+    # values packed within a few ulps of 7 (and a spread elsewhere): narrowing ends on ranges whose 4097 edges
+    # repeat, where numpy's equal-width histogram refuses and the explicit edges must take over
+    rng = np.random.default_rng(5)
+    ulps = np.nextafter(7.0, np.inf) - 7.0
+    values = np.concatenate([7.0 + ulps * rng.integers(-3, 4, 3000), rng.lognormal(2, 1, 2000)])
+    rng.shuffle(values)
+    chunked = metrics.iter_chunks(lambda s: values[s], values.size, chunk=700)
+    ordered = np.sort(values)
+    for k in (0, 1234, 2500, 4000, values.size - 1):
+        assert metrics._order_statistic(chunked, k, float(values.min()), float(values.max()), max_keep=20) == ordered[k]
+
+
 def test_aligned_scoring_is_the_exact_least_squares_fit():
     rng = np.random.default_rng(3)
     W = 50.0
