@@ -136,32 +136,34 @@ def match_tiles(ref, img, search: TileSearch, out: TileMatches) -> None:
             x0 = tx * tile
             y1 = min(y0 + tile, H)
             x1 = min(x0 + tile, W)
+            # the window's first displacement: costs[i, j] is the cost at (y_lo + i, x_lo + j)
+            y_lo = init_dy[ty, tx] - radius
+            x_lo = init_dx[ty, tx] - radius
+            for i in range(n):
+                _row_costs(ref, img, y0, y1, x0, x1, y_lo + i, x_lo, n, l2, costs[i])
             best = np.inf
             by = init_dy[ty, tx]
             bx = init_dx[ty, tx]
-            for i in range(n):
-                _row_costs(ref, img, y0, y1, x0, x1, init_dy[ty, tx] - radius + i, init_dx[ty, tx] - radius, n, l2,
-                           costs[i])
             for i in range(n):  # the first smallest cost in the search order, as before
                 for j in range(n):
                     if costs[i, j] < best:
                         best = costs[i, j]
-                        by = init_dy[ty, tx] - radius + i
-                        bx = init_dx[ty, tx] - radius + j
+                        by = y_lo + i
+                        bx = x_lo + j
             out_dy[ty, tx] = by
             out_dx[ty, tx] = bx
+            i_best = by - y_lo
+            j_best = bx - x_lo
             for k in range(3):
                 # an L2 search already holds the costs at the best ±1 that lie inside its window
-                i = by + k - 1 - (init_dy[ty, tx] - radius)
-                j = bx - (init_dx[ty, tx] - radius)
+                i = i_best + k - 1
                 if l2 and 0 <= i < n:
-                    cost_y[ty, tx, k] = costs[i, j]
+                    cost_y[ty, tx, k] = costs[i, j_best]
                 else:
                     cost_y[ty, tx, k] = _tile_cost(ref, img, y0, y1, x0, x1, by + k - 1, bx, True)
-                i = by - (init_dy[ty, tx] - radius)
-                j = bx + k - 1 - (init_dx[ty, tx] - radius)
+                j = j_best + k - 1
                 if l2 and 0 <= j < n:
-                    cost_x[ty, tx, k] = costs[i, j]
+                    cost_x[ty, tx, k] = costs[i_best, j]
                 else:
                     cost_x[ty, tx, k] = _tile_cost(ref, img, y0, y1, x0, x1, by, bx + k - 1, True)
 

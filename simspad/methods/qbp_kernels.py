@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from simspad.physics.pairwise_sum import pairwise_block, pairwise_sum
+from simspad.physics.pairwise_sum import pairwise_sum
 
 
 @numba.njit(cache=True, inline="always")
@@ -239,12 +239,8 @@ def lucas_kanade_tiles(ref, img, gy_ref, gx_ref, flow_y, flow_x, tile, iteration
                         rows[2, k] = gx * gx
                         rows[3, k] = gy * it
                         rows[4, k] = gx * it
-                    if tile <= 128:  # one block: what pairwise_sum does for it, without the call
-                        for q in range(5):
-                            sums[q] += pairwise_block(rows[q], 0, tile)
-                    else:
-                        for q in range(5):
-                            sums[q] += pairwise_sum(rows[q], 0, tile)
+                    for q in range(5):
+                        sums[q] += pairwise_sum(rows[q], 0, tile)
                 a11, a12, a22, b1, b2 = sums[0], sums[1], sums[2], sums[3], sums[4]
                 det = a11 * a22 - a12 * a12
                 if det > 1e-9 * (a11 + a22) ** 2 + 1e-30:

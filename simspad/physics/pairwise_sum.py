@@ -43,13 +43,23 @@ def pairwise_block(a, lo, n):
     return res
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def pairwise_sum(a, lo, n):
     """NumPy's pairwise sum of ``a[lo:lo + n]`` (what ``sum`` does along a contiguous axis): blocks of at most 128
-    values, longer runs split in halves (the first a multiple of 8) and the halves' sums added. The halving runs
-    on an explicit stack: numba functions that call themselves crash when loaded from numba's cache."""
+    values, longer runs split in halves (the first a multiple of 8) and the halves' sums added.
+
+    Inlined into its callers, so that a kernel summing many short runs (QBP's tile rows of 16 values) pays no
+    call for them: that call was a fifth of QBP's Lucas–Kanade kernel. Longer runs go to :func:`_pairwise_halves`.
+    """
     if n <= 128:
         return pairwise_block(a, lo, n)
+    return _pairwise_halves(a, lo, n)
+
+
+@numba.njit(cache=True)
+def _pairwise_halves(a, lo, n):
+    """:func:`pairwise_sum` of a run longer than 128 values. The halving runs on an explicit stack: numba functions
+    that call themselves crash when loaded from numba's cache."""
     depth = 64
     los = np.empty(depth, np.int64)
     ns = np.empty(depth, np.int64)

@@ -167,7 +167,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         return cam_poses[i], object_poses(ts, float(times[i]))
 
     def poses_of(i: int) -> tuple:
-        objects = object_poses(ts, float(times[i]))
+        objects = pose_at(i)[1]
         return tuple(objects[k] for k in object_names)
 
     emitting = set()  # rendered keyframes that show an emitter (each got an emission pass)
@@ -238,8 +238,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
                 key0 = np.maximum(key0 - key0_emission, 0.0)
                 probe = np.maximum(probe - ms.render_emission(seed + 1), 0.0)
         noise_y, noise = noise_map(key0, probe)
-    patcher = BlockPatcher(ms, pose_at, seed,
-                           lambda i: (out_dir / warp_names[i]).is_file())
+    patcher = BlockPatcher(ms, pose_at, seed, lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
                                 emission=target_emission if with_emission else None,
