@@ -2,7 +2,7 @@
 
 Run on any recording, e.g. one of the mini dataset::
 
-    python examples/inspect_recording.py output/mini/recordings/fan/fan_10lx.h5 --out fan_10lx.png
+    python examples/inspect_recording.py output/mini/recordings/fan/fan_100lx.h5 --out fan_100lx.png
 
 Panels: the sharp ground-truth irradiance; one SPAD binary frame; n SPAD bins around the instant inverted with
 the ML estimator (docs/sensors.md) in the same units as the ground truth; the conventional frame whose exposure holds
@@ -15,6 +15,8 @@ their numbers printed.
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import matplotlib
 
@@ -23,6 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from simspad.io.recording import open_recording  # noqa: E402
+from simspad.errors import SimSpadError  # noqa: E402
 from simspad.methods.spad_response import estimate_flux, log_flux_variance  # noqa: E402
 from simspad.physics.radiometry import detection_area_m2  # noqa: E402
 
@@ -101,4 +104,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except SimSpadError as exc:  # a missing or invalid recording: one line, as the simspad command prints it
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None

@@ -2,7 +2,7 @@
 
 Run on any recording with events, e.g. one of the mini dataset::
 
-    python examples/torch_dataset.py output/mini/recordings/fan/fan_10lx.h5 --window-ms 10 --bins 5
+    python examples/torch_dataset.py output/mini/recordings/fan/fan_100lx.h5 --window-ms 10 --bins 5
 
 ``simspad.open_recording(path).events.windows(window_s)`` is a lazy sequence (``len`` and ``[i]``) of numpy
 structured arrays with fields x, y, t (µs) and p (+1 ON / −1 OFF), so a ``torch.utils.data.Dataset`` only has to
@@ -18,10 +18,13 @@ grid sums to (ON − OFF) events of its window; the script prints both sums to s
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
 import simspad
+from simspad.errors import SimSpadError
 
 try:
     from torch.utils.data import DataLoader, Dataset
@@ -87,4 +90,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except SimSpadError as exc:  # a missing or invalid recording: one line, as the simspad command prints it
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None

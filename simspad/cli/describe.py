@@ -61,6 +61,7 @@ def describe_recording(path) -> str:
         lines = [f"recording {path}",
                  f"  size        {format_bytes(path.stat().st_size)}",
                  f"  sequence    {rec.sequence} (scene {rec.scene}, trajectory {a.get('trajectory', '-')})",
+                 f"  speed       ×{float(a.get('speed_factor', 1.0)):g} (trajectory played this many times faster)",
                  f"  lux         {rec.lux:g}",
                  f"  grid        {W}×{H} px, {dur * 1e3:.4g} ms",
                  f"  seed        {a.get('seed', '-')}, created {a.get('created_utc', '-')}",

@@ -14,6 +14,7 @@ from simspad.cli.describe import describe_dataset, describe_recording
 from simspad.cli.describe_spec import describe_spec
 from simspad.cli.describe_trajectory import describe_trajectory
 from simspad.dataset.spec import find_spec
+from simspad.io.bundled import find_trajectory
 from simspad.errors import SimSpadError
 
 _TRAJECTORY_SUFFIXES = (".json", ".csv", ".txt", ".tum")
@@ -31,6 +32,8 @@ def describe(path) -> str:
         Missing path or a kind of file ``info`` does not know; malformed files raise the loaders' errors.
     """
     path = find_spec(path)  # `simspad info mini` describes the bundled spec of that name
+    if not path.exists():  # `simspad info trajectories/office.toml`, as `simspad scenes` prints it
+        path = find_trajectory(path)
     if not path.exists():
         raise SimSpadError("no such file or directory", path=path)
     if path.is_dir():

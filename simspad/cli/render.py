@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from simspad.io.bundled import find_trajectory
 from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.render.summary import RenderSummary
 from simspad.sensors.presets import SpadParams
@@ -9,7 +10,10 @@ from simspad.sensors.presets import SpadParams
 
 def render_from_cli(scene, trajectory, *, out_dir, progress: bool, **settings) -> RenderSummary:
     """``simspad render``: :func:`~simspad.render.renderer.render_sequence`, with the keyframe count compared to
-    one render per bin of the SPAD preset. ``settings``: the fields of :class:`RenderSettings`."""
+    one render per bin of the SPAD preset. ``settings``: the fields of :class:`RenderSettings`. ``trajectory``: a
+    file, or a bundled trajectory named as ``simspad scenes`` prints it (``trajectories/office.toml``, ``office``)."""
+    if trajectory is not None:
+        trajectory = find_trajectory(trajectory)
     return render_sequence(scene, trajectory, RenderSettings(**settings), out_dir=out_dir, progress=progress,
                            spad_bin_s=SpadParams().bin_s)
 

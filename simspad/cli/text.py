@@ -29,13 +29,13 @@ def format_duration_s(x) -> str:
 
 
 def recording_table(recordings: list[dict], last_column: str, last_value: Callable[[dict], str]) -> list[str]:
-    """One aligned line per manifest recording entry (sequence, lux, status, size, simulate time, last column),
-    after a header line; text columns left-aligned, numbers right-aligned, trailing blanks stripped."""
-    rows = [("sequence", "lux", "status", "size", "simulate", last_column)]
+    """One aligned line per manifest recording entry (sequence, speed, lux, status, size, simulate time, last
+    column), after a header line; text columns left-aligned, numbers right-aligned, trailing blanks stripped."""
+    rows = [("sequence", "speed", "lux", "status", "size", "simulate", last_column)]
     for e in recordings:
         t = (e.get("timings") or {}).get("simulate_s")
-        rows.append((e["sequence"], f"{e['lux']:g}", e["status"], format_bytes(e.get("size")),
-                     "-" if t is None else f"{t:.1f} s", last_value(e)))
+        rows.append((e["sequence"], f"×{float(e.get('speed_factor', 1.0)):g}", f"{e['lux']:g}", e["status"],
+                     format_bytes(e.get("size")), "-" if t is None else f"{t:.1f} s", last_value(e)))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return ["  ".join(c.ljust(w) if i in (0, 2, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    return ["  ".join(c.ljust(w) if i in (0, 3, 6) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
             .rstrip() for r in rows]

@@ -467,7 +467,7 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",
              f"  total        {est.cpu_s / 3600:.2f} CPU-h",
-             f"  wall time    {hours(est.wall_s(workers))} here ({workers} worker(s))"]
+             _here_line(est, workers, hours)]
     for n in cluster_workers:
         lines.append(f"               {hours(est.wall_s(n))} on {n} workers (one core each, this machine's speed)")
     disk = f"  disk         {size(est.disk_bytes)} (recordings {size(est.recordings_bytes)}, renders " \
@@ -489,6 +489,16 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
     probed = f" (probed at {costs.sim_probe_px[0]}×{costs.sim_probe_px[1]} px)" if costs.sim_probe_px else ""
     lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]) + probed)
     return "\n".join(lines)
+
+
+def _here_line(est: Estimate, workers: int, hours) -> str:
+    """The wall time here: ``workers`` processes share this machine's cores, so more workers than cores run no
+    faster than one per core (the estimate's unit costs are one core's)."""
+    cores = default_workers()
+    if workers <= cores:
+        return f"  wall time    {hours(est.wall_s(workers))} here ({workers} worker(s))"
+    return (f"  wall time    {hours(est.wall_s(cores))} here ({workers} workers asked, but this machine has {cores} "
+            f"core(s): {workers} workers run no faster than {cores})")
 
 
 def disk_needed_bytes(spec, out_dir) -> int:
