@@ -141,11 +141,14 @@ def generate(spec, out_dir, executor, scheduler, workers, prune, estimate_only, 
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
               help="Results directory (required; no default).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Evaluation rate in Hz (default: spec or 1000).")
-def evaluate(target, methods, out_dir, rate_hz):
+@click.option("--param", "params", multiple=True, metavar="METHOD.NAME=VALUE",
+              help="Set a method's parameter, e.g. --param nedi_akf.aggregate_hz=800 (repeatable; over the spec's "
+                   "[evaluation.params.METHOD]; docs/methods.md lists each method's).")
+def evaluate(target, methods, out_dir, rate_hz, params):
     """Run fusion methods and baselines on a dataset or recording and score them."""
     from simspad.cli.evaluate import evaluate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    evaluate_from_cli(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz)
+    evaluate_from_cli(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz, params=params)
 
 
 @cli.command()

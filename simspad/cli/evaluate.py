@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from simspad.cli.simulate import parse_value
+from simspad.errors import SimSpadError
 from simspad.evaluate.evaluate import EvaluationFailed, evaluate
 from simspad.io.names import recording_key
 
@@ -32,11 +34,25 @@ def timing_table(timings: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def evaluate_from_cli(target, methods=None, out_dir=None, rate_hz=None) -> Path:
+def parse_method_params(items) -> dict[str, dict]:
+    """``["nedi_akf.aggregate_hz=800", ...]`` → ``{"nedi_akf": {"aggregate_hz": 800}}``; values typed as
+    ``--set``'s; SimSpadError naming ``--param`` on a malformed item (names and values are checked by evaluate)."""
+    out: dict[str, dict] = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        method, dot, name = key.strip().partition(".")
+        if not sep or not dot or not method or not name.strip():
+            raise SimSpadError(f"expected METHOD.NAME=VALUE, got {item!r}", field="--param")
+        out.setdefault(method, {})[name.strip()] = parse_value(value)
+    return out
+
+
+def evaluate_from_cli(target, methods=None, out_dir=None, rate_hz=None, params=()) -> Path:
     """The ``simspad evaluate`` command: evaluate, print a summary and the per-method timings, raise
     EvaluationFailed if a run failed."""
     timings: list[dict] = []
-    out, rows = evaluate(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz, timings=timings)
+    out, rows = evaluate(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz, timings=timings,
+                         params=parse_method_params(params))
     click.echo(summary_table(rows))
     click.echo("")
     click.echo("timings (method s: inside the method; total s: with scoring and writing; summed over workers)")

@@ -111,9 +111,13 @@ class EvaluationSpec:
 
     rate_hz: float = defaults.GT_RATE_HZ
     methods: tuple[str, ...] = ()
+    params: dict = field(default_factory=dict)
+    """Method name → parameters (``[evaluation.params.METHOD]``), validated against the method table."""
 
     def to_dict(self) -> dict:
-        return {"rate_hz": self.rate_hz, "methods": list(self.methods)}
+        # `params` only when set: the dict is hashed into the spec hash, which must not change for specs without it
+        return {"rate_hz": self.rate_hz, "methods": list(self.methods),
+                **({"params": {m: dict(p) for m, p in sorted(self.params.items())}} if self.params else {})}
 
 
 @dataclass(frozen=True)

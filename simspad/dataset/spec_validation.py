@@ -21,14 +21,14 @@ from simspad.errors import SimSpadError, SpecError
 from simspad.render.settings import DEFAULT_INTERPOLATION, INTERPOLATIONS
 from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
-from simspad.methods.registry import available_methods
+from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
 from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
 _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
              "min_rate_hz", "interpolation")
-_EVAL_KEYS = ("rate_hz", "methods")
+_EVAL_KEYS = ("rate_hz", "methods", "params")
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _MAX_NAME_CHARS = 100  # names become file names (255 bytes at most, with suffixes)
 
@@ -417,4 +417,21 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
     for i, m in enumerate(methods):
         if m not in known:
             err.add(f"evaluation.methods[{i}]", f"unknown method {m!r} (expected one of {', '.join(sorted(known))})")
-    return EvaluationSpec(rate_hz=rate if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods))
+    params = {}
+    raw_params = value.get("params", {})
+    if not isinstance(raw_params, dict):
+        err.add("evaluation.params", f"got {_type_name(raw_params)} (expected [evaluation.params.METHOD] tables)")
+        raw_params = {}
+    for m, p in raw_params.items():
+        if m not in known:
+            err.add(f"evaluation.params.{m}", f"unknown method (expected one of {', '.join(sorted(known))})")
+            continue
+        try:
+            checked = check_method_params(m, p, field="evaluation.params")
+        except SimSpadError as exc:
+            err.add(exc.field or f"evaluation.params.{m}", exc.message)
+            continue
+        if checked:
+            params[m] = checked
+    return EvaluationSpec(rate_hz=rate if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods),
+                          params=params)

@@ -28,13 +28,14 @@ before anything is written.
 
 from __future__ import annotations
 
+import json
 import multiprocessing as mp
 import os
 import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -67,7 +68,7 @@ from simspad.io.results_dir import (
     write_results_dir,
 )
 from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
-from simspad.methods.registry import available_methods, get_method
+from simspad.methods.registry import available_methods, check_method_params, get_method
 from simspad.physics.pairwise_sum import pairwise_sum
 
 MAX_WORKERS = 2
@@ -88,6 +89,8 @@ class Task:
     save_reconstructions: bool = True
     white: float | None = None
     """Sequence white point, computed once per recording by the caller (None: computed by the task)."""
+    params: dict = field(default_factory=dict)
+    """The method's parameters (validated by :func:`~simspad.methods.registry.check_method_params`)."""
 
 
 def _base_row(task: Task, white: float) -> dict:
@@ -96,7 +99,13 @@ def _base_row(task: Task, white: float) -> dict:
             "lux": e.lux, "recording": e.rel, "speed_factor": e.speed_factor, "image_speed_px_s": e.image_speed_px_s,
             "psnr_db": float("nan"), "ssim": float("nan"), **star_figures(None), "bandwidth_khz_per_pixel": float("nan"),
             "bandwidth_bits_per_pixel_s": float("nan"), "absolute_scale": True, "n_frames": 0,
-            "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": ""}
+            "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": "",
+            "params": params_text(task.params)}
+
+
+def params_text(params: dict) -> str:
+    """A method's parameters as results.csv holds them: compact JSON with sorted keys ("" for the defaults)."""
+    return json.dumps(params, sort_keys=True, separators=(",", ":")) if params else ""
 
 
 def run_task(task: Task, gt_cache: GroundTruthCache | None = None, rec=None) -> dict:
@@ -123,7 +132,7 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
     row = _base_row(task, white)
     out = {"row": row, "frame_rows": [], "mtf_rows": []}
     try:
-        method = get_method(task.method)
+        method = get_method(task.method, **task.params)
         row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
         missing = [k for k in method.requires if not rec.has(k)]
         if missing:
@@ -276,7 +285,7 @@ def timing_rows(tasks: list[Task], results: list[dict]) -> list[dict]:
 
 def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
              save_reconstructions: bool = True, progress: bool = True,
-             timings: list | None = None) -> tuple[Path, list[dict]]:
+             timings: list | None = None, params: dict | None = None) -> tuple[Path, list[dict]]:
     """Evaluate ``methods`` on every recording of ``target`` and write the results directory ``out_dir``.
 
     Parameters
@@ -295,6 +304,9 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     timings : list, optional
         Receives one dict per method (:func:`timing_rows`: runs, ``method_s``, ``total_s``), also written to
         ``results.json`` as ``timings``.
+    params : dict of str to dict, optional
+        Method name → parameters (``--param``), over the dataset spec's ``evaluation.params``; recorded in
+        results.csv's ``params`` column and results.json's ``params``.
 
     Returns
     -------
@@ -316,6 +328,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     if methods:
         for m in methods:
             get_method(m)  # unknown names are bad input: fail before doing anything
+    method_params = _method_params(ev.get("params"), params, manifest_path=Path(target) / "manifest.json"
+                                   if manifest else None)
     tasks = []
     whites = {}
     for e in entries:
@@ -325,7 +339,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                 raise SimSpadError("no ground-truth instants to evaluate", path=e.path, field="/gt/t")
             names = list(methods) if methods else available_methods(rec)
             whites[e.rel] = gt_white_point(rec, idx)  # once per recording, shared by its tasks
-        tasks.extend(Task(e, m, float(rate_hz), Path(), save_reconstructions, whites[e.rel]) for m in names)
+        tasks.extend(Task(e, m, float(rate_hz), Path(), save_reconstructions, whites[e.rel],
+                          method_params.get(m, {})) for m in names)
     if not tasks:
         raise SimSpadError("no method applies to these recordings", path=target, field="--methods")
     with atomic_path(out_dir) as tmp:
@@ -348,10 +363,27 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                                 "lux": e.lux, "speed_factor": e.speed_factor,
                                 "image_speed_px_s": e.image_speed_px_s} for e in entries],
                 "protocol": protocol_metadata(), "timings": timing,
+                **({"params": {m: p for m, p in sorted(method_params.items())
+                               if any(t.method == m for t in tasks)}} if method_params else {}),
                 "dataset": {k: (manifest or {}).get(k) for k in ("spec_hash", "seed")}}
         write_results_dir(tmp, rows, [f for r in results for f in r["frame_rows"]],
                           [m for r in results for m in r["mtf_rows"]], meta)
     return out_dir, rows
+
+
+def _method_params(spec_params, cli_params, *, manifest_path) -> dict[str, dict]:
+    """Each method's parameters: the dataset spec's ``evaluation.params`` (validated again: the manifest may have
+    been edited), then ``--param`` over them, key by key."""
+    out: dict[str, dict] = {}
+    if spec_params is not None:
+        if not isinstance(spec_params, dict):
+            raise SimSpadError(f"expected a table of method parameters, got {spec_params!r}", path=manifest_path,
+                               field="spec.evaluation.params")
+        for m, p in spec_params.items():
+            out[m] = check_method_params(m, p, path=manifest_path, field="spec.evaluation.params")
+    for m, p in (cli_params or {}).items():
+        out[m] = check_method_params(m, {**out.get(m, {}), **p}, field="--param")
+    return {m: p for m, p in out.items() if p}
 
 
 def evaluate_recording(rec_path, methods=None, out_dir=None, rate_hz=None) -> list[dict]:

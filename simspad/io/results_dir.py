@@ -32,7 +32,7 @@ from simspad.io.safe_paths import confined_path
 RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "speed_factor",
                   "image_speed_px_s", "psnr_db", "ssim", "mtf_at_0p25_cyc_px", "mtf_at_0p40_cyc_px",
                   "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
-                  "n_frames", "runtime_s", "white_point_ph_s_m2", "image", "error")
+                  "n_frames", "runtime_s", "white_point_ph_s_m2", "image", "error", "params")
 FRAME_COLUMNS = ("method", "recording", "frame", "t_s", "psnr_db", "ssim", "fit_a", "fit_b")
 MTF_COLUMNS = ("method", "recording", "freq_cyc_px", "mtf")
 CROP_PX = 256
@@ -63,7 +63,7 @@ def write_csv(path: Path, columns, rows) -> None:
 
 
 def _parse(col: str, v: str):
-    if col in ("method", "label", "sensors", "scene", "sequence", "recording", "image", "error"):
+    if col in ("method", "label", "sensors", "scene", "sequence", "recording", "image", "error", "params"):
         return v
     if col == "absolute_scale":
         return v.strip().lower() in ("true", "1", "yes")

@@ -44,7 +44,7 @@ window 10 ms. The initial state is the first measurement with P = its ``var_log`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Iterable, Iterator, NamedTuple
 
 import numba
@@ -325,6 +325,12 @@ def akf_params_for(rec, **overrides) -> AkfParams:
     return AkfParams(**values)
 
 
+#: The AKF's parameters as a method takes them (``**akf``): AkfParams' defaults, None where the recording decides
+#: (the threshold mismatch and the photoreceptor description, :func:`akf_params_for`).
+AKF_METHOD_PARAMETERS: dict[str, object] = {
+    f.name: (None if f.name == "q_threshold" or f.name.startswith("pr_") else f.default) for f in fields(AkfParams)}
+
+
 class NediAkf(Method):
     """NEDI+AKF (S+E): NEDI-deblurred SPAD aggregates fused with events by the AKF (the reference paper)."""
 
@@ -335,6 +341,7 @@ class NediAkf(Method):
     sensors = "S+E"
     requires = ("spad", "events")
     absolute_scale = True
+    forwarded_parameters = AKF_METHOD_PARAMETERS
 
     def __init__(self, aggregate_hz: float | None = None, n_bins: int | None = None, **akf):
         self.aggregate_hz = aggregate_hz
@@ -362,6 +369,7 @@ class AkfFrames(Method):
     sensors = "F+E"
     requires = ("frames", "events")
     absolute_scale = True
+    forwarded_parameters = AKF_METHOD_PARAMETERS
 
     def __init__(self, **akf):
         self.akf = akf

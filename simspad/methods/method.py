@@ -16,9 +16,10 @@ per second; a method's bandwidth is the sum over the sensors it reads:
 from __future__ import annotations
 
 import abc
+import inspect
 import math
 from dataclasses import dataclass
-from typing import Iterable, Iterator
+from typing import ClassVar, Iterable, Iterator
 
 import numpy as np
 
@@ -132,6 +133,18 @@ class Method(abc.ABC):
     absolute_scale: bool = True
     full_name: str = ""
     citation: str = ""
+    #: Parameters the constructor takes through ``**kwargs`` and hands on (the AKF's noise figures), name → default
+    #: (None: derived from the recording); its named arguments are found by :meth:`parameters` itself.
+    forwarded_parameters: ClassVar[dict[str, object]] = {}
+
+    @classmethod
+    def parameters(cls) -> dict[str, object]:
+        """Every parameter a spec's ``[evaluation.params.<name>]`` or ``--param <name>.KEY=VALUE`` may set, with
+        its default (None: derived from the recording, e.g. the aggregation rate from the SPAD's bin width)."""
+        named = {n: (None if p.default is inspect.Parameter.empty else p.default)
+                 for n, p in inspect.signature(cls.__init__).parameters.items()
+                 if n != "self" and p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)}
+        return {**named, **cls.forwarded_parameters}
 
     def reconstruct(self, rec, times_s) -> Reconstruction:
         """Reconstruct flux frames at ``times_s`` (seconds, non-decreasing) from recording ``rec``."""
