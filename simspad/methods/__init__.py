@@ -19,6 +19,6 @@ All parameters come from the recording's attrs (docs/format.md); none is tuned p
 """
 
 from simspad.methods.method import Bandwidth, Method, Reconstruction
-from simspad.methods.registry import available_methods, get_method, register
+from simspad.methods.registry import available_methods, get_method, method_parameters, register
 
-__all__ = ["Bandwidth", "Method", "Reconstruction", "available_methods", "get_method", "register"]
+__all__ = ["Bandwidth", "Method", "Reconstruction", "available_methods", "get_method", "method_parameters", "register"]

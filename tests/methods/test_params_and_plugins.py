@@ -169,3 +169,12 @@ def test_an_installed_plugin_method_runs_in_evaluate_workers_and_on_the_leaderbo
     assert refused.returncode == 2 and "gain must be > 0" in refused.stderr
     missing = simspad_cli.run("evaluate", evaluation_dataset, "--methods", "toy_gain", "--out", tmp_path / "no")
     assert missing.returncode == 2 and "unknown method 'toy_gain'" in missing.stderr
+
+
+def test_the_method_interface_is_public_from_the_top_level():
+    import simspad
+    from simspad.methods.method import Method
+
+    assert simspad.Method is Method and simspad.get_method("cf", f_cut_hz=1.0).alpha == pytest.approx(6.283185307)
+    assert simspad.method_parameters("cf") == {"f_cut_hz": 0.1, "chunk_s": 0.001}
+    assert set(simspad.__all__) >= {"Method", "register", "get_method", "open_recording"}
