@@ -7,17 +7,14 @@ evaluation) and ``docs/internals.md`` (the package's layers and where to add thi
 ``rec.spad.blocks(n)``, ``rec.frames.items()`` and ``rec.gt.items()`` are lazy sequences usable as a
 ``torch.utils.data.Dataset`` (see ``examples/torch_dataset.py``).
 
-The method interface is public too: subclass :class:`Method` (yield flux frames, add reads to the bandwidth
-tally) and declare it in your package's ``simspad.methods`` entry points, or :func:`register` it in this process;
-:func:`get_method` builds any method by name with its parameters (``docs/methods.md``).
+The method interface is public in :mod:`simspad.methods` (``Method``, ``Reconstruction``, ``Bandwidth``,
+``register``, ``get_method``, ``method_parameters``, ``available_methods``): subclass ``Method`` and declare it in
+your package's ``simspad.methods`` entry points (``docs/methods.md``). It is not re-exported here, because every
+layer imports this module for ``__version__`` and must not reach the methods through it.
 """
 
 __version__ = "0.1.0"
-__all__ = ["__version__", "open_recording", "Method", "Reconstruction", "Bandwidth", "register", "get_method",
-           "available_methods", "method_parameters"]
-
-_METHOD_API = {"Method", "Reconstruction", "Bandwidth", "register", "get_method", "available_methods",
-               "method_parameters"}
+__all__ = ["__version__", "open_recording"]
 
 
 def __getattr__(name: str):
@@ -25,8 +22,4 @@ def __getattr__(name: str):
         from simspad.io.recording import open_recording  # deferred: `import simspad` (so `simspad --help`) stays without h5py
 
         return open_recording
-    if name in _METHOD_API:
-        from simspad import methods  # deferred: `import simspad` stays without numba and the methods
-
-        return getattr(methods, name)
     raise AttributeError(f"module 'simspad' has no attribute {name!r}")

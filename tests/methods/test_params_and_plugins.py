@@ -171,10 +171,11 @@ def test_an_installed_plugin_method_runs_in_evaluate_workers_and_on_the_leaderbo
     assert missing.returncode == 2 and "unknown method 'toy_gain'" in missing.stderr
 
 
-def test_the_method_interface_is_public_from_the_top_level():
-    import simspad
+def test_the_method_interface_is_public_in_simspad_methods():
+    import simspad.methods as api
     from simspad.methods.method import Method
 
-    assert simspad.Method is Method and simspad.get_method("cf", f_cut_hz=1.0).alpha == pytest.approx(6.283185307)
-    assert simspad.method_parameters("cf") == {"f_cut_hz": 0.1, "chunk_s": 0.001}
-    assert set(simspad.__all__) >= {"Method", "register", "get_method", "open_recording"}
+    assert api.Method is Method and api.get_method("cf", f_cut_hz=1.0).alpha == pytest.approx(6.283185307)
+    assert api.method_parameters("cf") == {"f_cut_hz": 0.1, "chunk_s": 0.001}
+    assert set(api.__all__) >= {"Method", "Reconstruction", "Bandwidth", "register", "get_method",
+                                "method_parameters", "available_methods"}
