@@ -204,6 +204,30 @@ def scenes(contact_sheet):
     scenes_from_cli(contact_sheet=contact_sheet)
 
 
+@cli.command()
+@click.argument("target", type=click.Path(path_type=Path))
+@click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
+              help="preview.mp4, .gif or .png (a strip of 5 instants); for a dataset, a folder (one file per "
+                   "recording, named by its key, with --kind's suffix).")
+@click.option("--kind", type=click.Choice(["mp4", "gif", "png"]), default="mp4", show_default=True,
+              help="For a dataset: the kind of each recording's preview.")
+@click.option("--start", "start_s", type=float, default=None, help="First instant shown, s (default: the start).")
+@click.option("--duration", "duration_s", type=float, default=None, help="Span shown, s (default: all).")
+@click.option("--slowdown", type=float, default=100.0, show_default=True,
+              help="Video seconds per recording second.")
+@click.option("--fps", type=float, default=25.0, show_default=True, help="Video frames per second.")
+@click.option("--spad-rate", "spad_rate_hz", type=float, default=1000.0, show_default=True,
+              help="Aggregate rate of the SPAD panel, Hz.")
+@click.option("--event-window-ms", type=float, default=1.0, show_default=True,
+              help="Accumulation window of the events panel, ms.")
+def preview(target, out_path, kind, start_s, duration_s, slowdown, fps, spad_rate_hz, event_window_ms):
+    """Watch a recording (or every recording of a dataset): ground truth, SPAD, frames and events side by side."""
+    from simspad.cli.preview import preview_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
+
+    preview_from_cli(target, out_path, kind=kind, start_s=start_s, duration_s=duration_s, slowdown=slowdown,
+                     fps=fps, spad_rate_hz=spad_rate_hz, event_window_s=event_window_ms * 1e-3)
+
+
 @cli.command(name="export")
 @click.argument("recording", type=click.Path(path_type=Path))
 @click.option("--to", "fmt", type=click.Choice(list(EXPORT_FORMATS)), required=True,
