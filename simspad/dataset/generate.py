@@ -41,6 +41,7 @@ from simspad.dataset.directory import (
     RENDERS_DIR,
     DatasetLock,
     check_dataset_owner,
+    check_inside_dataset,
     check_prune,
     check_render_cache,
     remove_temporaries,
@@ -153,13 +154,15 @@ def _remove_obsolete(out_dir: Path, manifest: ManifestState, log) -> None:
     """Recordings and renders of the previous manifest that the new spec no longer has are deleted, so the
     folder holds exactly the dataset its manifest describes."""
     for rel in manifest.obsolete_recordings:
-        p = out_dir / rel
+        p = check_inside_dataset(out_dir, rel)  # never through a link leading out of the dataset
         if p.is_file():
             p.unlink()
             log(f"removed {rel} (no longer in the spec)")
     for rel in manifest.obsolete_renders:
-        p = out_dir / rel
-        if rel and p.is_dir() and p.parent == out_dir / RENDERS_DIR:
+        if not rel:
+            continue
+        p = check_inside_dataset(out_dir, rel)
+        if p.is_dir() and p.parent == out_dir / RENDERS_DIR:
             shutil.rmtree(p, ignore_errors=True)
 
 
