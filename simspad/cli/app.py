@@ -15,7 +15,7 @@ from pathlib import Path
 import click
 
 from simspad import __version__, defaults
-from simspad.cli.interrupt import first_sigint_only
+from simspad.cli.interrupt import Terminated, first_sigint_only, sigterm_raises
 from simspad.cli.library_noise import quiet_library_warnings
 from simspad.errors import SimSpadError
 from simspad.io.export import FORMATS as EXPORT_FORMATS
@@ -185,10 +185,12 @@ def snr(out_path):
 @cli.command()
 @click.argument("path")
 def info(path):
-    """Summarise a spec (.toml or a bundled name: mini, simspad), trajectory, recording (.h5) or dataset directory."""
-    from simspad.cli.info import describe  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
+    """Summarise a spec (.toml or a bundled name: mini, simspad), trajectory, recording (.h5) or dataset directory.
 
-    click.echo(describe(path))
+    Exit status 1 when a dataset's recording no longer matches the sha256 its manifest records."""
+    from simspad.cli.info import info_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
+
+    info_from_cli(path)
 
 
 @cli.command()
@@ -226,9 +228,9 @@ def main(argv: list[str] | None = None) -> int:
     (a caller inside its own process) the caller's SIGINT handler is put back.
     """
     # a second Ctrl-C must not break into the clean-up of the first
-    with first_sigint_only(restore=argv is not None) as sigint:
+    with first_sigint_only(restore=argv is not None) as sigint, sigterm_raises():
         code = _main(argv, sigint)
-    if sigint.interrupted and code != 130:  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
+    if sigint.interrupted and code not in (130, 143):  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
         click.echo("simspad: interrupted", err=True)
         code = 130
     writer = sys.modules.get("simspad.io.recording.writer")
@@ -266,6 +268,9 @@ def _main(argv: list[str] | None, sigint=None) -> int:
         return exc.exit_code
     except click.exceptions.Abort as exc:
         # click turns Ctrl-C (KeyboardInterrupt) into Abort; a declined prompt is an Abort of its own
+        if isinstance(exc.__cause__, Terminated):
+            click.echo("simspad: terminated", err=True)
+            return 143
         interrupted = isinstance(exc.__cause__, KeyboardInterrupt)
         if interrupted and sigint is not None:
             sigint.interrupted = True
@@ -274,6 +279,9 @@ def _main(argv: list[str] | None, sigint=None) -> int:
     except click.ClickException as exc:
         exc.show()
         return exc.exit_code
+    except Terminated:
+        click.echo("simspad: terminated", err=True)
+        return 143
     except KeyboardInterrupt:
         if sigint is not None:
             sigint.interrupted = True
