@@ -61,8 +61,8 @@ def is_bookkeeping(name: str) -> bool:
 class OutputLock:
     """``fcntl.flock`` on ``<folder>/.simspad.lock`` while a command writes the folder.
 
-    A second run on the same folder is refused at once, naming the holder. The kernel releases the lock when the
-    process dies, even by kill -9. ``command`` (written into the lock file) names the holder in a refusal;
+    A second run on the same folder is refused at once, naming the holder (the line the holder writes into the
+    file, emptied again on release). The kernel releases the lock when the process dies, even by kill -9. ``command`` (written into the lock file) names the holder in a refusal;
     ``what`` names the folder (``folder``, ``dataset``).
     """
 
@@ -93,6 +93,10 @@ class OutputLock:
 
     def __exit__(self, *exc) -> None:
         if self.fd is not None:
+            # The holder line is for a refusal while held; emptied on release, the folder's bytes are the same
+            # from run to run. The file itself stays: deleting it would let two runs lock two different files.
+            with contextlib.suppress(OSError):
+                os.ftruncate(self.fd, 0)
             fcntl.flock(self.fd, fcntl.LOCK_UN)
             os.close(self.fd)
             self.fd = None
