@@ -23,8 +23,9 @@ from simspad.io.results_dir import slug
 
 def _legacy_output(path: Path) -> set[str] | None:
     """A folder written before markers: a leaderboard (``leaderboard.html``) or a results folder (``results.json``
-    of format ``simspad-results``), where the leaderboard goes by default. Nothing of it is deleted: empty set."""
-    if (path / "leaderboard.html").is_file():
+    of format ``simspad-results``, or a ``results.csv`` written by another tool), where the leaderboard goes by
+    default. Nothing of it is deleted: empty set."""
+    if (path / "leaderboard.html").is_file() or (path / "results.csv").is_file():
         return set()
     try:
         meta = json.loads((path / "results.json").read_text(encoding="utf-8"))
