@@ -75,13 +75,45 @@ def check_output_path(path: str | Path, *, kind: str | None = None, field: str |
     return path
 
 
-def check_output_file(path: str | Path, *, field: str | None = "--out") -> Path:
+def check_output_file(path: str | Path, *, field: str | None = "--out", recognise=None,
+                      what: str = "a file of this kind") -> Path:
     """Up-front check of an output file, before any slow work: not a special file or link, and its folder can
-    be created and written."""
+    be created and written.
+
+    ``recognise(path) -> bool``, when given, says whether an existing non-empty file is one the command writes
+    (``what`` names that kind in the refusal): a command replaces its own earlier output, never a file of
+    another kind (a recording named as an export's ``--out``, a user's document named as a figure).
+    """
     path = Path(path)
     check_output_path(path, kind="file", field=field)
+    if recognise is not None and path.is_file() and path.stat().st_size > 0 and not _recognised(recognise, path):
+        raise SimSpadError(f"exists and is not {what}; refusing to replace it (choose a new name, or delete the "
+                           "file first if it is yours to lose)", path=path, field=field)
     ensure_writable_dir(path.parent, what=f"{field or 'output'} folder")
     return path
+
+
+def _recognised(recognise, path: Path) -> bool:
+    try:
+        return bool(recognise(path))
+    except Exception:  # noqa: BLE001 - a file the recogniser cannot even read is not one this command wrote
+        return False
+
+
+def starts_with(magic: bytes, *, within: int = 0):
+    """A recogniser for :func:`check_output_file`: the file starts with ``magic`` (or, with ``within`` > 0, holds
+    it in its first ``within`` bytes)."""
+
+    def recognise(path: Path) -> bool:
+        with open(path, "rb") as f:
+            head = f.read(max(within, len(magic)))
+        return head.startswith(magic) if within == 0 else magic in head
+
+    return recognise
+
+
+#: PNG files (``simspad snr``, ``simspad scenes --contact-sheet``).
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def is_disk_full(exc: BaseException) -> bool:

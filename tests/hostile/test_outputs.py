@@ -17,13 +17,16 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from simspad.errors import SimSpadError
 from simspad.io.atomic import atomic_path
 from simspad.io.hashing import file_sha256
 from simspad.io.output_dirs import OutputLock, marker_name
+from simspad.io.render_dir import write_render_dir
 from tests.helpers.evaluation_data import write_recording, write_submission
+from tests.helpers.synthetic_recordings import write_recording as synthetic_recording
 
 PRECIOUS = b"a user's own notes\n"
 
@@ -117,6 +120,39 @@ def test_export_npz_again_replaces_only_its_own_files(tmp_path, simspad_cli):
     assert not (out / "spad.npz").exists()  # its own file of the previous run, no longer written
     assert json.loads((out / "metadata.json").read_text())["recording"] == str(without_spad)
     assert "spad.npz" not in json.loads((out / marker_name("export-npz")).read_text())["files"]
+
+
+@pytest.mark.parametrize("fmt", ["dsec", "evt3"])
+def test_file_export_replaces_only_an_earlier_export_of_its_format(fmt, dataset_copy, tmp_path, simspad_cli):
+    """A file --out is replaced only when it is the command's own kind: ``export --to dsec --out OTHER.h5`` used
+    to replace another recording (or any file) whole."""
+    rec = tmp_path / "events.h5"
+    synthetic_recording(rec, lambda t: np.full((12, 16), 1e15) * (1.5 + np.sin(300 * t)), spad=False, frames=False)
+    victim = dataset_copy / "recordings/ramp/ramp_100lx.h5"
+    digest = file_sha256(victim)
+    _one_line_refusal(simspad_cli.run("export", rec, "--to", fmt, "--out", victim), "is not a file of",
+                      f"export --to {fmt}")
+    assert file_sha256(victim) == digest
+    notes = _precious(tmp_path, "notes.raw")
+    _one_line_refusal(simspad_cli.run("export", rec, "--to", fmt, "--out", notes), "refusing to replace it")
+    assert notes.read_bytes() == PRECIOUS
+    out = tmp_path / f"out.{fmt}"
+    for _ in range(2):  # the second run replaces the first's file: its own kind
+        proc = simspad_cli.run("export", rec, "--to", fmt, "--out", out)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+def test_simulate_and_snr_replace_only_their_own_kind_of_file(tmp_path, simspad_cli):
+    render = write_render_dir(tmp_path / "render", [0.0, 0.002], np.full((2, 6, 8, 3), 0.5, np.float32)).parent
+    thesis = _precious(tmp_path, "thesis.h5")
+    args = ("simulate", render, "--lux", 100, "--sensors", "spad")
+    _one_line_refusal(simspad_cli.run(*args, "--out", thesis), "is not a SimSPAD recording")
+    _one_line_refusal(simspad_cli.run("snr", "--out", thesis), "is not a PNG image")
+    assert thesis.read_bytes() == PRECIOUS
+    rec = tmp_path / "rec.h5"
+    for _ in range(2):  # a recording simulate wrote is replaced by the next run
+        proc = simspad_cli.run(*args, "--out", rec)
+        assert proc.returncode == 0, proc.stderr[-3000:]
 
 
 # --------------------------------------------------------------------------------------------------- evaluate
