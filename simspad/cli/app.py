@@ -225,12 +225,14 @@ def main(argv: list[str] | None = None) -> int:
 
     Without ``argv`` (the ``simspad`` program: its arguments are ``sys.argv``) the process exits next, and a Ctrl-C
     from the end of the command on is ignored (:func:`~simspad.cli.interrupt.first_sigint_only`); with ``argv``
-    (a caller inside its own process) the caller's SIGINT handler is put back.
+    (a caller inside its own process) the caller's SIGINT handler is put back. SIGTERM runs the same clean-up as
+    Ctrl-C and ends the command with status 143 (:func:`~simspad.cli.interrupt.sigterm_raises`).
     """
     # a second Ctrl-C must not break into the clean-up of the first
     with first_sigint_only(restore=argv is not None) as sigint, sigterm_raises():
         code = _main(argv, sigint)
-    if sigint.interrupted and code not in (130, 143):  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
+    # a KeyboardInterrupt was swallowed (a weakref callback, a __del__); 143: SIGTERM ended the command, not SIGINT
+    if sigint.interrupted and code not in (130, 143):
         click.echo("simspad: interrupted", err=True)
         code = 130
     writer = sys.modules.get("simspad.io.recording.writer")

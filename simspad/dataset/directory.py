@@ -55,8 +55,10 @@ def remove_temporaries(out_dir: Path) -> list[Path]:
     if rec_root.is_dir() and not rec_root.is_symlink():  # never delete through a link that leads out of the dataset
         roots += [p for p in rec_root.iterdir() if p.is_dir() and not p.is_symlink()]
     ren_root = out_dir / RENDERS_DIR
-    if ren_root.is_dir() and not ren_root.is_symlink():  # keyframes and timeline.json are written in place (each atomically): a killed render
-        for p in ren_root.iterdir():  # leaves its temporary names there
+    # keyframes and timeline.json are written in place (each atomically): a killed render leaves its temporary
+    # names there
+    if ren_root.is_dir() and not ren_root.is_symlink():
+        for p in ren_root.iterdir():
             if p.is_dir() and not p.is_symlink() and not _TMP_NAME.match(p.name):
                 roots += [p, p / "frames"]
     for root in roots:

@@ -62,8 +62,9 @@ class OutputLock:
     """``fcntl.flock`` on ``<folder>/.simspad.lock`` while a command writes the folder.
 
     A second run on the same folder is refused at once, naming the holder (the line the holder writes into the
-    file, emptied again on release). The kernel releases the lock when the process dies, even by kill -9. ``command`` (written into the lock file) names the holder in a refusal;
-    ``what`` names the folder (``folder``, ``dataset``).
+    file, emptied again on release). The kernel releases the lock when the process dies, even by kill -9.
+    ``command`` (written into the lock file) names the holder in a refusal; ``what`` names the folder
+    (``folder``, ``dataset``).
     """
 
     def __init__(self, directory: str | Path, command: str = "simspad", what: str = "folder"):
@@ -231,8 +232,8 @@ def owned_dir_in_place(path: str | Path, command: str, *, legacy: Legacy | None 
 
     The marker is written before anything else, so a folder left by an interrupted run is recognised as the
     command's own; the command records its files with :func:`write_marker` when done (``also``: see
-    :func:`claim_output_dir`). A folder created here and
-    still holding nothing but the lock and marker is removed if the command fails.
+    :func:`claim_output_dir`). A folder created here and still holding nothing but the lock and marker is
+    removed if the command fails.
     """
     path = Path(path)
     previous = claim_output_dir(path, command, legacy=legacy, also=also, field=field)
