@@ -115,6 +115,30 @@ def check_prune(out_dir: Path, obsolete: list[str], prune: bool, log) -> None:
     log(f"--prune: removing {len(present)} item(s) no longer in the spec: {shown}")
 
 
+def check_no_links_out(out_dir: Path) -> None:
+    """Refuse a dataset folder whose ``recordings/``, ``renders/`` or their sub-folders are symbolic links leading
+    out of it: a run deletes there (``--prune``, a damaged render's ``timeline.json``, stale keyframes, a killed
+    run's temporaries), and must not delete outside the dataset; ``evaluate`` refuses such recordings too."""
+    inside = out_dir.resolve()
+    candidates = [out_dir / RECORDINGS_DIR, out_dir / RENDERS_DIR]
+    for root in candidates[:2]:
+        if root.is_dir() and not root.is_symlink():
+            candidates += sorted(root.iterdir())
+    candidates += [p / "frames" for p in candidates if p.parent.name == RENDERS_DIR and p.is_dir()]
+    for p in candidates:
+        if not p.is_symlink():
+            continue
+        try:
+            target = p.resolve()
+        except (OSError, RuntimeError):  # a link loop
+            target = None
+        if target is None or not target.is_relative_to(inside):
+            raise SimSpadError(f"{p.relative_to(out_dir)} is a symbolic link to {target or 'a loop'}, outside the "
+                               "dataset; a run deletes files there (--prune, damaged renders, temporaries) and "
+                               "SimSPAD deletes only inside the dataset folder: replace the link by the folder "
+                               "itself", path=out_dir, field="--out")
+
+
 def check_inside_dataset(out_dir: Path, rel: str) -> Path:
     """``out_dir / rel`` if no part of it below ``out_dir`` is a symbolic link and ``rel`` has no ``..``: a file
     deleted there is the dataset's own. Otherwise a :class:`SimSpadError` naming the link (nothing is deleted)."""

@@ -42,6 +42,7 @@ from simspad.dataset.directory import (
     DatasetLock,
     check_dataset_owner,
     check_inside_dataset,
+    check_no_links_out,
     check_prune,
     check_render_cache,
     remove_temporaries,
@@ -123,6 +124,7 @@ def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *,
         log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
     ensure_writable_dir(out_dir, what="dataset output")
     check_dataset_owner(out_dir, load_previous_manifest(out_dir), spec.name)  # before the lock file is made
+    check_no_links_out(out_dir)
     with DatasetLock(out_dir):
         for p in remove_temporaries(out_dir):
             log(f"removed temporary {p.relative_to(out_dir)} left by an interrupted run")

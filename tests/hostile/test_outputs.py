@@ -316,7 +316,7 @@ spp = 2
 @pytest.mark.slow
 def test_prune_never_deletes_through_a_symbolic_link(tmp_path, simspad_cli):
     """``generate --prune`` used to delete files outside the dataset when ``recordings/<seq>`` is a symbolic
-    link; now it refuses, naming the link, and deletes nothing (not even what is inside the dataset)."""
+    link; now it refuses the layout (as ``evaluate`` does), naming the link, and deletes nothing."""
     both = tmp_path / "both.toml"
     both.write_text(_PRUNE_SPEC.format(sequences=_SEQUENCE.format(name="a") + _SEQUENCE.format(name="b")))
     only_a = tmp_path / "only_a.toml"
@@ -330,6 +330,9 @@ def test_prune_never_deletes_through_a_symbolic_link(tmp_path, simspad_cli):
     _precious(outside, "precious.txt")
     kept_outside, kept_inside = _tree(outside), _tree(out)
     proc = simspad_cli.run("generate", only_a, "--out", out, "--workers", 1, "--prune")
-    _one_line_refusal(proc, "recordings/b is a symbolic link", "--prune")
+    _one_line_refusal(proc, "recordings/b is a symbolic link", "outside the dataset")
     assert _tree(outside) == kept_outside and (outside / "b_100lx.h5").is_file()
     assert _tree(out) == kept_inside
+    # the same without --prune: a run also deletes damaged renders and temporaries, so the layout is refused
+    _one_line_refusal(simspad_cli.run("generate", both, "--out", out, "--workers", 1), "recordings/b is a symbolic")
+    assert _tree(outside) == kept_outside and _tree(out) == kept_inside
