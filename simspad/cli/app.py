@@ -75,7 +75,8 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
                    "rest by reprojection (directly seen emitters rendered, reflected light warped), rendering blocks or "
                    "whole keyframes where the warps disagree — 1.0–3.6x less render work on the built-in scenes at 64 "
                    "spp, with more events than linear on the office (docs/rendering.md).")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
+              help="Render directory: new, empty, or a render directory (its cached keyframes are re-used).")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
            out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
@@ -139,7 +140,8 @@ def generate(spec, out_dir, executor, scheduler, workers, prune, estimate_only, 
 @click.option("--methods", default=None, help="Comma-separated method names, from: " + METHOD_NAMES_HELP +
               " (default: the spec's evaluation.methods, else all that the data allows).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
-              help="Results directory (required; no default).")
+              help="Results directory (required; no default): new, empty, or one `evaluate` wrote before, whose "
+                   "own files are replaced and others kept.")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Evaluation rate in Hz (default: spec or 1000).")
 def evaluate(target, methods, out_dir, rate_hz):
     """Run fusion methods and baselines on a dataset or recording and score them."""
@@ -208,7 +210,8 @@ def scenes(contact_sheet):
 @click.option("--to", "fmt", type=click.Choice(list(EXPORT_FORMATS)), required=True,
               help="; ".join(f"{k}: {v}" for k, v in EXPORT_FORMATS.items()) + ".")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
-              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz).")
+              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz); an existing one is "
+                   "replaced only if it is an earlier export of the same format.")
 @click.option("--spad-packing", "packing", type=click.Choice(list(EXPORT_PACKINGS)), default="packed",
               show_default=True, help="npz: SPAD bits 8 pixels a byte (as stored) or one uint8 0/1 per pixel.")
 @click.option("--frames-format", type=click.Choice(list(EXPORT_FRAME_FORMATS)), default="png", show_default=True,
