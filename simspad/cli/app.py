@@ -15,7 +15,7 @@ from pathlib import Path
 import click
 
 from simspad import __version__, defaults
-from simspad.cli.interrupt import first_sigint_only
+from simspad.cli.interrupt import Terminated, first_sigint_only, sigterm_raises
 from simspad.cli.library_noise import quiet_library_warnings
 from simspad.errors import SimSpadError
 from simspad.io.export import FORMATS as EXPORT_FORMATS
@@ -75,7 +75,8 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
                    "rest by reprojection (directly seen emitters rendered, reflected light warped), rendering blocks or "
                    "whole keyframes where the warps disagree — 1.0–3.6x less render work on the built-in scenes at 64 "
                    "spp, with more events than linear on the office (docs/rendering.md).")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
+              help="Render directory: new, empty, or a render directory (its cached keyframes are re-used).")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
            out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
@@ -139,7 +140,8 @@ def generate(spec, out_dir, executor, scheduler, workers, prune, estimate_only, 
 @click.option("--methods", default=None, help="Comma-separated method names, from: " + METHOD_NAMES_HELP +
               " (default: the spec's evaluation.methods, else all that the data allows).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
-              help="Results directory (required; no default).")
+              help="Results directory (required; no default): new, empty, or one `evaluate` wrote before, whose "
+                   "own files are replaced and others kept.")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Evaluation rate in Hz (default: spec or 1000).")
 @click.option("--param", "params", multiple=True, metavar="METHOD.NAME=VALUE",
               help="Set a method's parameter, e.g. --param nedi_akf.aggregate_hz=800 (repeatable; over the spec's "
@@ -188,10 +190,12 @@ def snr(out_path):
 @cli.command()
 @click.argument("path")
 def info(path):
-    """Summarise a spec (.toml or a bundled name: mini, simspad), trajectory, recording (.h5) or dataset directory."""
-    from simspad.cli.info import describe  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
+    """Summarise a spec (.toml or a bundled name: mini, simspad), trajectory, recording (.h5) or dataset directory.
 
-    click.echo(describe(path))
+    Exit status 1 when a dataset's recording no longer matches the sha256 its manifest records."""
+    from simspad.cli.info import info_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
+
+    info_from_cli(path)
 
 
 @cli.command()
@@ -233,7 +237,8 @@ def preview(target, out_path, kind, start_s, duration_s, slowdown, fps, spad_rat
 @click.option("--to", "fmt", type=click.Choice(list(EXPORT_FORMATS)), required=True,
               help="; ".join(f"{k}: {v}" for k, v in EXPORT_FORMATS.items()) + ".")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
-              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz).")
+              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz); an existing one is "
+                   "replaced only if it is an earlier export of the same format.")
 @click.option("--spad-packing", "packing", type=click.Choice(list(EXPORT_PACKINGS)), default="packed",
               show_default=True, help="npz: SPAD bits 8 pixels a byte (as stored) or one uint8 0/1 per pixel.")
 @click.option("--frames-format", type=click.Choice(list(EXPORT_FRAME_FORMATS)), default="png", show_default=True,
@@ -250,12 +255,14 @@ def main(argv: list[str] | None = None) -> int:
 
     Without ``argv`` (the ``simspad`` program: its arguments are ``sys.argv``) the process exits next, and a Ctrl-C
     from the end of the command on is ignored (:func:`~simspad.cli.interrupt.first_sigint_only`); with ``argv``
-    (a caller inside its own process) the caller's SIGINT handler is put back.
+    (a caller inside its own process) the caller's SIGINT handler is put back. SIGTERM runs the same clean-up as
+    Ctrl-C and ends the command with status 143 (:func:`~simspad.cli.interrupt.sigterm_raises`).
     """
     # a second Ctrl-C must not break into the clean-up of the first
-    with first_sigint_only(restore=argv is not None) as sigint:
+    with first_sigint_only(restore=argv is not None) as sigint, sigterm_raises():
         code = _main(argv, sigint)
-    if sigint.interrupted and code != 130:  # the KeyboardInterrupt was swallowed (a weakref callback, a __del__)
+    # a KeyboardInterrupt was swallowed (a weakref callback, a __del__); 143: SIGTERM ended the command, not SIGINT
+    if sigint.interrupted and code not in (130, 143):
         click.echo("simspad: interrupted", err=True)
         code = 130
     writer = sys.modules.get("simspad.io.recording.writer")
@@ -293,6 +300,9 @@ def _main(argv: list[str] | None, sigint=None) -> int:
         return exc.exit_code
     except click.exceptions.Abort as exc:
         # click turns Ctrl-C (KeyboardInterrupt) into Abort; a declined prompt is an Abort of its own
+        if isinstance(exc.__cause__, Terminated):
+            click.echo("simspad: terminated", err=True)
+            return 143
         interrupted = isinstance(exc.__cause__, KeyboardInterrupt)
         if interrupted and sigint is not None:
             sigint.interrupted = True
@@ -301,6 +311,9 @@ def _main(argv: list[str] | None, sigint=None) -> int:
     except click.ClickException as exc:
         exc.show()
         return exc.exit_code
+    except Terminated:
+        click.echo("simspad: terminated", err=True)
+        return 143
     except KeyboardInterrupt:
         if sigint is not None:
             sigint.interrupted = True

@@ -151,8 +151,9 @@ def _event_lines(rec, n_px: int, dur: float) -> list[str]:
 _VERIFY_MAX_BYTES = 20 * 2**30
 
 
-def _verification_lines(path: Path, recs: list[dict]) -> list[str]:
-    """Whether the complete recordings' bytes still match the manifest's sha256 (or that the check was skipped)."""
+def _verification_lines(path: Path, recs: list[dict], corrupt: list | None = None) -> list[str]:
+    """Whether the complete recordings' bytes still match the manifest's sha256 (or that the check was skipped);
+    the mismatches, (path, why), are appended to ``corrupt`` when given."""
     complete = [e for e in recs if e["status"] == "complete"]
     total = sum(e.get("size") or 0 for e in complete)
     if not complete:
@@ -162,11 +163,14 @@ def _verification_lines(path: Path, recs: list[dict]) -> list[str]:
     bad = [(e["path"], why) for e in complete if (why := recording_mismatch(path, e))]
     lines = [f"  verified    {len(complete) - len(bad)} of {len(complete)} complete recordings match their sha256"]
     lines += [f"  CORRUPT     {rel}: {why}" for rel, why in bad]
+    if corrupt is not None:
+        corrupt.extend(bad)
     return lines
 
 
-def describe_dataset(path) -> str:
-    """Summary of a dataset directory: spec, and every recording's status, size and timings.
+def describe_dataset(path, corrupt: list | None = None) -> str:
+    """Summary of a dataset directory: spec, and every recording's status, size and timings; the recordings
+    whose bytes no longer match the manifest's sha256 are appended to ``corrupt`` as (path, why) when given.
 
     Raises
     ------
@@ -188,7 +192,7 @@ def describe_dataset(path) -> str:
              f"  recordings  {len(recs)}: {by_status['complete']} complete, {by_status['pending']} pending, "
              f"{by_status['failed']} failed; {format_bytes(total)}"]
     lines += ["    " + line for line in recording_table(recs, "path", lambda e: e["path"])]
-    lines += _verification_lines(path, recs)
+    lines += _verification_lines(path, recs, corrupt)
     for e in recs:
         if e["status"] == "failed" and e.get("error"):
             lines.append(f"  failed {e['path']}: {e['error']}")

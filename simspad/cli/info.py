@@ -10,6 +10,8 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import click
+
 from simspad.cli.describe import describe_dataset, describe_recording
 from simspad.cli.describe_spec import describe_spec
 from simspad.cli.describe_trajectory import describe_trajectory
@@ -22,9 +24,30 @@ _RECORDING_SUFFIXES = (".h5", ".hdf5")
 _TRAJECTORY_TOML_KEYS = {"camera", "objects"}
 
 
-def describe(path) -> str:
+class VerificationFailed(SimSpadError):
+    """A dataset's recordings no longer match the sha256 its manifest records: the summary was printed; exit
+    status 1 (as ``sha256sum --check``), so scripts and CI see it."""
+
+    exit_code = 1
+
+
+def info_from_cli(path) -> None:
+    """The ``simspad info`` command: print the summary; raise :class:`VerificationFailed` after it when a
+    dataset's recording failed its hash check."""
+    corrupt: list = []
+    click.echo(describe(path, corrupt))
+    if corrupt:
+        rel, why = corrupt[0]
+        raise VerificationFailed(f"{len(corrupt)} recording(s) do not match the sha256 in manifest.json; first: "
+                                 f"{rel}: {why} (re-run `simspad generate` on the dataset to redo them)",
+                                 path=path)
+
+
+def describe(path, corrupt: list | None = None) -> str:
     """Summary text of a spec (``.toml`` or a bundled spec's name), trajectory (``.toml``/``.json``/``.csv``/``.txt``/``.tum``),
     recording (``.h5``) or dataset directory (holding ``manifest.json``).
+
+    ``corrupt`` (a list) receives the (path, why) of a dataset's recordings that fail their sha256 check.
 
     Raises
     ------
@@ -38,12 +61,12 @@ def describe(path) -> str:
         raise SimSpadError("no such file or directory", path=path)
     if path.is_dir():
         if (path / "manifest.json").is_file():
-            return describe_dataset(path)
+            return describe_dataset(path, corrupt)
         raise SimSpadError("not a dataset directory (no manifest.json; expected a dataset directory, a spec, "
                            "a trajectory or a recording)", path=path)
     suffix = path.suffix.lower()
     if path.name == "manifest.json":
-        return describe_dataset(path.parent)
+        return describe_dataset(path.parent, corrupt)
     if suffix in _RECORDING_SUFFIXES:
         return describe_recording(path)
     if suffix == ".toml":

@@ -2,20 +2,52 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 from simspad.io.bundled import find_trajectory
+from simspad.io.output_dirs import owned_dir_in_place, write_marker
 from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.render.summary import RenderSummary
 from simspad.sensors.presets import SpadParams
 
 
+#: What a render directory written before markers holds: keyframes (and warp renders' noise probe), temporaries.
+_RENDER_FILE = re.compile(r"\d{6}-[0-9a-f]{16}\.exr|noise-probe-[0-9a-f]{16}\.exr|\..+\.tmp-\d+-[0-9a-f]{8}")
+
+
+def _legacy_render_dir(path: Path) -> set[str] | None:
+    """Recognise a render directory written before markers: it has ``timeline.json``, or (an interrupted
+    render) nothing but ``frames/`` holding keyframe files. The renderer deletes only stale keyframes of its
+    own naming, so no file list is needed: an empty set."""
+    if (path / "timeline.json").is_file():
+        return set()
+    names = {p.name for p in path.iterdir()}
+    frames = path / "frames"
+    if names == {"frames"} and frames.is_dir() and not frames.is_symlink() \
+            and all(_RENDER_FILE.fullmatch(p.name) for p in frames.iterdir()):
+        return set()
+    return None
+
+
 def render_from_cli(scene, trajectory, *, out_dir, progress: bool, **settings) -> RenderSummary:
     """``simspad render``: :func:`~simspad.render.renderer.render_sequence`, with the keyframe count compared to
     one render per bin of the SPAD preset. ``settings``: the fields of :class:`RenderSettings`. ``trajectory``: a
-    file, or a bundled trajectory named as ``simspad scenes`` prints it (``trajectories/office.toml``, ``office``)."""
+    file, or a bundled trajectory named as ``simspad scenes`` prints it (``trajectories/office.toml``, ``office``).
+
+    ``out_dir`` must be new, empty or a render directory (marker ``.simspad-render``, or ``timeline.json``), so
+    keyframes are never mixed into a dataset or another folder; it is locked while the render writes it.
+    """
+    out_dir = Path(out_dir)
     if trajectory is not None:
         trajectory = find_trajectory(trajectory)
-    return render_sequence(scene, trajectory, RenderSettings(**settings), out_dir=out_dir, progress=progress,
-                           spad_bin_s=SpadParams().bin_s)
+    with owned_dir_in_place(out_dir, "render", legacy=_legacy_render_dir):
+        summary = render_sequence(scene, trajectory, RenderSettings(**settings), out_dir=out_dir,
+                                  progress=progress, spad_bin_s=SpadParams().bin_s)
+        files = {"timeline.json", *(f"frames/{p.name}" for p in (out_dir / "frames").iterdir()
+                                    if _RENDER_FILE.fullmatch(p.name) and not p.name.startswith("."))}
+        write_marker(out_dir, "render", files)
+    return summary
 
 
 def describe_render(summary: RenderSummary) -> str:

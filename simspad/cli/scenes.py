@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from simspad.io.atomic import check_output_file
+from simspad.io.atomic import PNG_MAGIC, check_output_file, starts_with
 from simspad.io.bundled import DATA_ROOT
 from simspad.render.contact_sheet import write_contact_sheet
 from simspad.scenes.library import list_scenes
@@ -15,7 +15,8 @@ from simspad.scenes.library import list_scenes
 def scenes_from_cli(contact_sheet: Path | None = None) -> None:
     """``simspad scenes``: print the built-in scenes; optionally render all of them into one contact sheet."""
     if contact_sheet is not None:
-        check_output_file(contact_sheet, field="--contact-sheet")  # before minutes of rendering
+        check_output_file(contact_sheet, field="--contact-sheet", recognise=starts_with(PNG_MAGIC),
+                          what="a PNG image")  # before minutes of rendering
     scenes = list_scenes()
     width = max((len(s.name) for s in scenes), default=4)
     trajs = [_display_path(s.default_trajectory) if s.default_trajectory else "-" for s in scenes]

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from simspad.errors import SimSpadError
 from simspad.io.atomic import check_output_file
+from simspad.io.recording.layout import FORMAT as RECORDING_FORMAT
 from simspad.sensors.presets import SENSOR_KINDS, sensor_params
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
@@ -71,6 +72,17 @@ def parse_overrides(items, kinds: list[str]) -> dict[str, dict]:
     return out
 
 
+def _is_recording(path: Path) -> bool:
+    """An HDF5 file whose root ``format`` attribute names a SimSPAD recording: what ``simulate`` may replace."""
+    import h5py  # deferred: h5py is loaded by the simulation right after
+
+    if not h5py.is_hdf5(path):
+        return False
+    with h5py.File(path, "r") as h5:
+        fmt = h5.attrs.get("format")
+    return (fmt.decode(errors="replace") if isinstance(fmt, bytes) else fmt) == RECORDING_FORMAT
+
+
 def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | None, duration_s: float | None,
                       seed: int, overrides, out_path) -> Path:
     """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`."""
@@ -86,6 +98,6 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
     if seed is None or seed < 0 or seed >= 2**64:
         raise SimSpadError(f"must be an integer in [0, 2**64), got {seed!r}", field="--seed")
-    check_output_file(out_path)
+    check_output_file(out_path, recognise=_is_recording, what="a SimSPAD recording")
     settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed)
     return simulate_recording(render_dir, out_path, settings, progress=sys.stderr.isatty())

@@ -16,19 +16,16 @@ dead one left (the lock guarantees no one else is writing them).
 
 from __future__ import annotations
 
-import fcntl
-import os
 import re
 import shutil
 from pathlib import Path
 
 from simspad.errors import SimSpadError
 from simspad.io.names import lux_label, speed_suffix
-from simspad.io.provenance import utc_now
+from simspad.io.output_dirs import LOCK_NAME, OutputLock
 from simspad.io.render_dir import read_render_dir
 from simspad.render.keyframe_files import frame_is_intact
 
-LOCK_NAME = ".simspad.lock"
 RENDERS_DIR = "renders"
 RECORDINGS_DIR = "recordings"
 #: Temporary names written by simspad.io.atomic.temporary_sibling: ``.<name>.tmp-<pid>-<8 hex>``.
@@ -41,33 +38,13 @@ def recording_rel_path(sequence_name: str, lux: float, speed: float = 1.0) -> st
 
 
 
-class DatasetLock:
-    """``fcntl.flock`` on ``<out>/.simspad.lock`` for the whole run: a second run on the same directory is
-    refused at once with a clear message. The kernel releases the lock when the process dies, even by kill -9."""
+class DatasetLock(OutputLock):
+    """The lock of a dataset folder (:class:`simspad.io.output_dirs.OutputLock`, the one ``evaluate`` and the
+    other commands take on their output folders): a second run on the same directory is refused at once with a
+    clear message. The kernel releases the lock when the process dies, even by kill -9."""
 
     def __init__(self, out_dir: Path):
-        self.path = Path(out_dir) / LOCK_NAME
-        self.fd: int | None = None
-
-    def __enter__(self) -> "DatasetLock":
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.read(fd, 200).decode(errors="replace").strip() or "another process"
-            os.close(fd)
-            raise SimSpadError(f"another `simspad generate` is already writing this dataset ({holder}); wait for "
-                               "it to finish or choose another --out", path=self.path.parent) from None
-        os.ftruncate(fd, 0)
-        os.write(fd, f"pid {os.getpid()} on {os.uname().nodename} since {utc_now()}\n".encode())
-        self.fd = fd
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.fd is not None:
-            fcntl.flock(self.fd, fcntl.LOCK_UN)
-            os.close(self.fd)
-            self.fd = None
+        super().__init__(out_dir, "simspad generate", what="dataset")
 
 
 def remove_temporaries(out_dir: Path) -> list[Path]:
@@ -75,15 +52,17 @@ def remove_temporaries(out_dir: Path) -> list[Path]:
     removed = []
     roots = [out_dir, out_dir / RENDERS_DIR, out_dir / RECORDINGS_DIR]
     rec_root = out_dir / RECORDINGS_DIR
-    if rec_root.is_dir():
-        roots += [p for p in rec_root.iterdir() if p.is_dir()]
+    if rec_root.is_dir() and not rec_root.is_symlink():  # never delete through a link that leads out of the dataset
+        roots += [p for p in rec_root.iterdir() if p.is_dir() and not p.is_symlink()]
     ren_root = out_dir / RENDERS_DIR
-    if ren_root.is_dir():  # keyframes and timeline.json are written in place (each atomically): a killed render
-        for p in ren_root.iterdir():  # leaves its temporary names there
+    # keyframes and timeline.json are written in place (each atomically): a killed render leaves its temporary
+    # names there
+    if ren_root.is_dir() and not ren_root.is_symlink():
+        for p in ren_root.iterdir():
             if p.is_dir() and not p.is_symlink() and not _TMP_NAME.match(p.name):
                 roots += [p, p / "frames"]
     for root in roots:
-        if not root.is_dir():
+        if not root.is_dir() or root.is_symlink():
             continue
         for p in root.iterdir():
             if _TMP_NAME.match(p.name):
@@ -127,11 +106,54 @@ def check_prune(out_dir: Path, obsolete: list[str], prune: bool, log) -> None:
     present = [rel for rel in obsolete if (out_dir / rel).exists()]
     if not present:
         return
+    for rel in present:
+        check_inside_dataset(out_dir, rel)
     shown = ", ".join(present[:6]) + (f" and {len(present) - 6} more" if len(present) > 6 else "")
     if not prune:
         raise SimSpadError(f"the spec no longer lists {len(present)} item(s) of this dataset: {shown}; re-run with "
                            "--prune to delete them, or choose another --out", path=out_dir, field="--out")
     log(f"--prune: removing {len(present)} item(s) no longer in the spec: {shown}")
+
+
+def check_no_links_out(out_dir: Path) -> None:
+    """Refuse a dataset folder whose ``recordings/``, ``renders/`` or their sub-folders are symbolic links leading
+    out of it: a run deletes there (``--prune``, a damaged render's ``timeline.json``, stale keyframes, a killed
+    run's temporaries), and must not delete outside the dataset; ``evaluate`` refuses such recordings too."""
+    inside = out_dir.resolve()
+    candidates = [out_dir / RECORDINGS_DIR, out_dir / RENDERS_DIR]
+    for root in candidates[:2]:
+        if root.is_dir() and not root.is_symlink():
+            candidates += sorted(root.iterdir())
+    candidates += [p / "frames" for p in candidates if p.parent.name == RENDERS_DIR and p.is_dir()]
+    for p in candidates:
+        if not p.is_symlink():
+            continue
+        try:
+            target = p.resolve()
+        except (OSError, RuntimeError):  # a link loop
+            target = None
+        if target is None or not target.is_relative_to(inside):
+            raise SimSpadError(f"{p.relative_to(out_dir)} is a symbolic link to {target or 'a loop'}, outside the "
+                               "dataset; a run deletes files there (--prune, damaged renders, temporaries) and "
+                               "SimSPAD deletes only inside the dataset folder: replace the link by the folder "
+                               "itself", path=out_dir, field="--out")
+
+
+def check_inside_dataset(out_dir: Path, rel: str) -> Path:
+    """``out_dir / rel`` if no part of it below ``out_dir`` is a symbolic link and ``rel`` has no ``..``: a file
+    deleted there is the dataset's own. Otherwise a :class:`SimSpadError` naming the link (nothing is deleted)."""
+    parts = Path(rel).parts
+    if not rel or Path(rel).is_absolute() or ".." in parts:
+        raise SimSpadError(f"the manifest names {rel!r}, which leaves the dataset folder; refusing to delete it",
+                           path=out_dir / "manifest.json", field="path")
+    here = out_dir
+    for part in parts:
+        here = here / part
+        if here.is_symlink():
+            raise SimSpadError(f"{here.relative_to(out_dir)} is a symbolic link; refusing to delete through it "
+                               f"(it would delete {rel} outside the dataset): replace the link by a folder or "
+                               "choose another --out", path=out_dir, field="--prune")
+    return out_dir / rel
 
 
 def check_render_cache(render_dir: Path, log) -> bool:

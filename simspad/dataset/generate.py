@@ -41,6 +41,8 @@ from simspad.dataset.directory import (
     RENDERS_DIR,
     DatasetLock,
     check_dataset_owner,
+    check_inside_dataset,
+    check_no_links_out,
     check_prune,
     check_render_cache,
     remove_temporaries,
@@ -122,6 +124,7 @@ def generate(spec, out_dir=None, executor: ExecutorConfig = ExecutorConfig(), *,
         log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
     ensure_writable_dir(out_dir, what="dataset output")
     check_dataset_owner(out_dir, load_previous_manifest(out_dir), spec.name)  # before the lock file is made
+    check_no_links_out(out_dir)
     with DatasetLock(out_dir):
         for p in remove_temporaries(out_dir):
             log(f"removed temporary {p.relative_to(out_dir)} left by an interrupted run")
@@ -153,13 +156,15 @@ def _remove_obsolete(out_dir: Path, manifest: ManifestState, log) -> None:
     """Recordings and renders of the previous manifest that the new spec no longer has are deleted, so the
     folder holds exactly the dataset its manifest describes."""
     for rel in manifest.obsolete_recordings:
-        p = out_dir / rel
+        p = check_inside_dataset(out_dir, rel)  # never through a link leading out of the dataset
         if p.is_file():
             p.unlink()
             log(f"removed {rel} (no longer in the spec)")
     for rel in manifest.obsolete_renders:
-        p = out_dir / rel
-        if rel and p.is_dir() and p.parent == out_dir / RENDERS_DIR:
+        if not rel:
+            continue
+        p = check_inside_dataset(out_dir, rel)
+        if p.is_dir() and p.parent == out_dir / RENDERS_DIR:
             shutil.rmtree(p, ignore_errors=True)
 
 

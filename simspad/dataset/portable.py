@@ -2,8 +2,9 @@
 
 A spec names its trajectory and user scene by path; :mod:`simspad.dataset.spec_validation` resolves them to
 absolute paths. Stored as such in each recording (its ``spec`` and ``trajectory`` attrs), they would make the
-file's bytes depend on where the repository or the spec folder lives. Stored relative to the spec's folder,
-the same spec generates the same bytes from any checkout.
+file's bytes depend on where the repository or the spec folder lives. Stored relative to the spec's folder (the
+user's files) or to the bundled specs' folder (SimSPAD's bundled trajectories), the same spec generates the same
+bytes from any checkout and from any folder it is copied to.
 """
 
 from __future__ import annotations
@@ -11,15 +12,26 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from simspad.io.bundled import DATA_ROOT, DATASETS_DIR
 from simspad.scenes.library import resolve_scene
 
 
 def portable_path(path: str | Path | None, base: Path | None) -> str | None:
-    """``path`` relative to ``base`` (POSIX, possibly with ``..``) when both are absolute; otherwise as given."""
+    """``path`` relative to ``base`` (POSIX, possibly with ``..``) when both are absolute; otherwise as given.
+
+    A file of SimSPAD's bundled data (a bundled trajectory, found when the spec's folder has no file of that
+    name) is stored relative to the bundled specs' folder instead, as the bundled specs themselves name it
+    (``../trajectories/<file>``): the same string wherever the spec sits, and the very bytes that the bundled
+    specs' recordings always had.
+    """
     if path is None:
         return None
     p = Path(path)
-    if base is None or not p.is_absolute():
+    if not p.is_absolute():
+        return str(path)
+    if p.resolve().is_relative_to(DATA_ROOT.resolve()):
+        return Path(os.path.relpath(p.resolve(), DATASETS_DIR.resolve())).as_posix()
+    if base is None:
         return str(path)
     return Path(os.path.relpath(p, base)).as_posix()
 

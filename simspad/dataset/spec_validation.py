@@ -139,6 +139,11 @@ def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> Dat
         output = f"output/{name}"
     output_path = Path(output).expanduser()
     if not output_path.is_absolute():
+        if ".." in output_path.parts:
+            # A relative output stays below the current directory: a spec (perhaps someone else's) must not walk
+            # out of it; a folder elsewhere is named explicitly, by an absolute `output` or by --out.
+            err.add("output", f"{output!r} leaves the current directory (a relative output may not contain '..'; "
+                              "give an absolute path or --out to write elsewhere)")
         output_path = Path.cwd() / output_path
 
     lux = _validate_lux(raw, err)

@@ -56,12 +56,13 @@ from simspad.evaluate.protocol import (
     star_figures,
 )
 from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
-from simspad.io.atomic import atomic_path
+from simspad.io.output_dirs import owned_output_dir
 from simspad.io.reconstructions import ReconstructionSink
 from simspad.io.recording import open_recording
 from simspad.io.results_dir import (
     check_output_dir,
     crop,
+    legacy_results,
     save_png,
     slug,
     write_images,
@@ -296,7 +297,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         Method names; default: the dataset spec's ``evaluation.methods``, else every method the recording
         allows.
     out_dir : path
-        Results directory (created atomically; an existing results directory is replaced).
+        Results directory: new, empty, or written by `evaluate` before (its files are replaced, files that
+        others put there are kept: :mod:`simspad.io.output_dirs`); locked while the run writes it.
     rate_hz : float, optional
         Evaluation rate; default the spec's ``evaluation.rate_hz`` or 1000 Hz.
     progress : bool
@@ -315,7 +317,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     if out_dir is None:
         raise SimSpadError("an output directory is required", field="--out")
     out_dir = Path(out_dir)
-    check_output_dir(out_dir)
+    check_output_dir(out_dir, "evaluate")
     entries, manifest = list_recordings(Path(target))
     entries = [fill_entry(e) for e in entries]
     ev = spec_evaluation(manifest, entries[0])
@@ -343,8 +345,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                           method_params.get(m, {})) for m in names)
     if not tasks:
         raise SimSpadError("no method applies to these recordings", path=target, field="--methods")
-    with atomic_path(out_dir) as tmp:
-        tmp.mkdir(parents=True)
+    with owned_output_dir(out_dir, "evaluate", legacy=legacy_results("evaluate")) as tmp:
         for t in tasks:
             t.work_dir = tmp
         results = run_tasks(tasks, workers, progress)

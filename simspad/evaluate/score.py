@@ -27,9 +27,9 @@ from simspad.evaluate.protocol import (
     star_figures,
 )
 from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
-from simspad.io.atomic import atomic_path
+from simspad.io.output_dirs import owned_output_dir
 from simspad.io.recording import open_recording
-from simspad.io.results_dir import check_output_dir, write_images, write_results_dir
+from simspad.io.results_dir import check_output_dir, legacy_results, write_images, write_results_dir
 from simspad.io.submission import (
     check_group_frames,
     check_group_members,
@@ -101,12 +101,11 @@ def score(submission, dataset_dir, out_dir=None, rate_hz=None) -> tuple[Path, li
         ev = spec_evaluation(manifest, entries[0])
         rate_hz = float(ev.get("rate_hz", DEFAULT_RATE_HZ) or DEFAULT_RATE_HZ)
     out_dir = Path(out_dir) if out_dir is not None else submission.with_name(submission.stem + "_results")
-    check_output_dir(out_dir)
+    check_output_dir(out_dir, "score")
     attrs, parts, h5 = read_submission(submission, entries, rate_hz)
     rows, frame_rows, mtf_rows = [], [], []
     try:
-        with atomic_path(out_dir) as tmp:
-            tmp.mkdir(parents=True)
+        with owned_output_dir(out_dir, "score", legacy=legacy_results("score")) as tmp:
             for name, e, idx in parts:
                 with open_recording(e.path) as rec:
                     white = gt_white_point(rec, idx)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import re
 import shutil
 import stat
 import uuid
@@ -17,6 +18,10 @@ from pathlib import Path
 from typing import Iterator
 
 from simspad.errors import SimSpadError
+
+
+#: What :func:`temporary_sibling` appends after ``.<name>.tmp-``: the writer's pid and 8 hex digits.
+_TMP_SUFFIX = re.compile(r"(\d+)-[0-9a-f]{8}")
 
 
 def temporary_sibling(path: str | Path) -> Path:
@@ -70,13 +75,45 @@ def check_output_path(path: str | Path, *, kind: str | None = None, field: str |
     return path
 
 
-def check_output_file(path: str | Path, *, field: str | None = "--out") -> Path:
+def check_output_file(path: str | Path, *, field: str | None = "--out", recognise=None,
+                      what: str = "a file of this kind") -> Path:
     """Up-front check of an output file, before any slow work: not a special file or link, and its folder can
-    be created and written."""
+    be created and written.
+
+    ``recognise(path) -> bool``, when given, says whether an existing non-empty file is one the command writes
+    (``what`` names that kind in the refusal): a command replaces its own earlier output, never a file of
+    another kind (a recording named as an export's ``--out``, a user's document named as a figure).
+    """
     path = Path(path)
     check_output_path(path, kind="file", field=field)
+    if recognise is not None and path.is_file() and path.stat().st_size > 0 and not _recognised(recognise, path):
+        raise SimSpadError(f"exists and is not {what}; refusing to replace it (choose a new name, or delete the "
+                           "file first if it is yours to lose)", path=path, field=field)
     ensure_writable_dir(path.parent, what=f"{field or 'output'} folder")
     return path
+
+
+def _recognised(recognise, path: Path) -> bool:
+    try:
+        return bool(recognise(path))
+    except Exception:  # noqa: BLE001 - a file the recogniser cannot even read is not one this command wrote
+        return False
+
+
+def starts_with(magic: bytes, *, within: int = 0):
+    """A recogniser for :func:`check_output_file`: the file starts with ``magic`` (or, with ``within`` > 0, holds
+    it in its first ``within`` bytes)."""
+
+    def recognise(path: Path) -> bool:
+        with open(path, "rb") as f:
+            head = f.read(max(within, len(magic)))
+        return head.startswith(magic) if within == 0 else magic in head
+
+    return recognise
+
+
+#: PNG files (``simspad snr``, ``simspad scenes --contact-sheet``).
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def is_disk_full(exc: BaseException) -> bool:
@@ -128,7 +165,9 @@ def atomic_path(path: str | Path, *, kind: str | None = None) -> Iterator[Path]:
     """Yield a temporary path; on success rename it to ``path``, on any exception delete it.
 
     Works for files and directories (``kind``: see :func:`check_output_path`, checked before anything is
-    written). The parent directory is created if needed. A full disk raises one :class:`SimSpadError` naming it.
+    written). A directory replaces only a missing or empty one: nothing is ever deleted to make room (see
+    :mod:`simspad.io.output_dirs` for folders a command re-writes). The parent directory is created if needed. A
+    full disk raises one :class:`SimSpadError` naming it.
     """
     path = Path(path)
     check_output_path(path, kind=kind, field=None)
@@ -140,9 +179,12 @@ def atomic_path(path: str | Path, *, kind: str | None = None) -> Iterator[Path]:
         if tmp.is_file():
             fsync_file(tmp)
         check_output_path(path, kind="dir" if tmp.is_dir() else "file", field=None)
-        if path.is_dir() and tmp.is_dir():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
+        if tmp.is_dir() and path.is_dir() and any(path.iterdir()):
+            # Never delete a folder to put another in its place: it may hold what this command did not write.
+            # Folders that commands re-write go through simspad.io.output_dirs, which replaces only their files.
+            raise SimSpadError("is a folder that is not empty; refusing to replace it (choose a new or empty "
+                               "folder)", path=path)
+        os.replace(tmp, path)  # over a file, or an empty folder
     except BaseException as exc:
         _remove(tmp)
         if is_disk_full(exc):
@@ -164,8 +206,8 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
     except OSError:
         return removed
     for p in siblings:
-        pid_text = p.name[len(prefix):].split("-", 1)[0]
-        if not pid_text.isdigit() or int(pid_text) == os.getpid() or _pid_alive(int(pid_text)):
+        match = _TMP_SUFFIX.fullmatch(p.name[len(prefix):])  # exactly the names temporary_sibling makes
+        if match is None or int(match[1]) == os.getpid() or _pid_alive(int(match[1])):
             continue
         _remove(p)
         removed.append(p)

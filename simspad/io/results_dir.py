@@ -1,6 +1,7 @@
 """The results directory shared by ``simspad evaluate``, ``simspad score`` and ``simspad leaderboard``.
 
-Layout (one directory per run, written atomically)::
+Layout (one directory per run; each file written whole under a temporary name, then moved in; files that
+another command or the user put there are kept: :mod:`simspad.io.output_dirs`)::
 
     results.csv        one row per method × recording (columns RESULT_COLUMNS)
     frames.csv         per-frame detail (FRAME_COLUMNS)
@@ -11,6 +12,9 @@ Layout (one directory per run, written atomically)::
     reconstructions/<rec>/<method>.h5
                        the reconstructions as scored (/t [N] float64 s, /flux [N,H,W] float32 ph s⁻¹ m⁻²;
                        written by :class:`simspad.io.reconstructions.ReconstructionSink`)
+    .simspad-evaluate or .simspad-score
+                       the marker: which command wrote the folder and the files it wrote
+    .simspad.lock      held by the one command writing the folder
 """
 
 from __future__ import annotations
@@ -25,8 +29,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from simspad.errors import InputError, SimSpadError
-from simspad.io.atomic import check_output_path
+from simspad.errors import InputError
+from simspad.io.output_dirs import claim_output_dir
 from simspad.io.safe_paths import confined_path
 
 RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "speed_factor",
@@ -133,12 +137,29 @@ def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_r
                                       encoding="utf-8")
 
 
-def check_output_dir(out_dir: Path) -> None:
-    """Refuse to replace a non-empty directory that is not a SimSPAD results directory (or a link, device...)."""
-    check_output_path(out_dir, kind="dir")
-    if out_dir.exists():
-        if not out_dir.is_dir():
-            raise SimSpadError("exists and is not a directory", path=out_dir, field="--out")
-        if any(out_dir.iterdir()) and not (out_dir / "results.json").is_file():
-            raise SimSpadError("exists, is not empty and is not a SimSPAD results directory (refusing to "
-                               "replace it)", path=out_dir, field="--out")
+#: The files of a results folder, as written before folders carried a marker (:func:`legacy_results`).
+_LEGACY_RESULT_FILES = re.compile(r"(results\.csv|frames\.csv|mtf\.csv|results\.json|images/[^/]+/[^/]+\.png"
+                                  r"|reconstructions/[^/]+/[^/]+\.h5)")
+
+
+def legacy_results(command: str):
+    """Recognise a results folder that ``simspad <command>`` wrote before markers: its ``results.json`` says
+    ``format`` ``simspad-results`` and ``kind`` ``command``; its own files are those of the layout above."""
+
+    def recognise(path: Path) -> set[str] | None:
+        try:
+            meta = json.loads((path / "results.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        if not isinstance(meta, dict) or meta.get("format") != "simspad-results" or meta.get("kind") != command:
+            return None
+        return {rel for p in path.rglob("*") if p.is_file() and not p.is_symlink()
+                and _LEGACY_RESULT_FILES.fullmatch(rel := p.relative_to(path).as_posix())}
+
+    return recognise
+
+
+def check_output_dir(out_dir: Path, command: str) -> None:
+    """Refuse ``out_dir`` unless it is new, empty or a results folder ``simspad <command>`` wrote (its marker
+    ``.simspad-<command>``, or an older one's ``results.json``); a link or special file is refused too."""
+    claim_output_dir(out_dir, command, legacy=legacy_results(command))

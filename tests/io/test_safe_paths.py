@@ -76,7 +76,7 @@ def test_evaluate_and_info_verify_the_manifest_sha256(evaluation_dataset, tmp_pa
     data = bytearray(rec.read_bytes())
     data[offset + 100] ^= 0x01  # one flipped bit in /gt/flux
     rec.write_bytes(bytes(data))
-    assert main(["info", str(ds)]) == 0
+    assert main(["info", str(ds)]) == 1  # a failed check is a failure (issue 33; tests/hostile)
     assert "CORRUPT     recordings/ramp/ramp_10lx.h5: sha256 differs" in capsys.readouterr().out
     assert main(["evaluate", str(ds), "--methods", "ni", "--out", str(tmp_path / "res")]) == 2
     err = capsys.readouterr().err

@@ -1,10 +1,11 @@
 """Writing a leaderboard: ``leaderboard.md``, ``leaderboard.csv``, ``leaderboard_regime.csv``,
 ``leaderboard.html`` and the PNG files the markdown links (``leaderboard_*.png``, ``leaderboard_strips/``), each
-written atomically.
+written atomically, and the marker ``.simspad-leaderboard`` listing them (:mod:`simspad.io.output_dirs`).
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from simspad.errors import SimSpadError
@@ -15,27 +16,58 @@ from simspad.evaluate.leaderboard.plots import plot_psnr_vs_bandwidth, plot_psnr
 from simspad.evaluate.leaderboard.regime import build_regime, write_regime_csv
 from simspad.evaluate.leaderboard.regime_plots import plot_pareto_cells, plot_regime_heatmaps, plot_spad_minus_frames
 from simspad.evaluate.leaderboard.tables import write_csv_table
-from simspad.io.atomic import atomic_path, ensure_writable_dir
+from simspad.io.atomic import atomic_path
+from simspad.io.output_dirs import check_no_link, claim_output_dir, owned_dir_in_place, remove_stale_files, write_marker
 from simspad.io.results_dir import slug
 
 
-def _write_bytes(path: Path, data: bytes) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+def _legacy_output(path: Path) -> set[str] | None:
+    """A folder written before markers: a leaderboard (``leaderboard.html``) or a results folder (``results.json``
+    of format ``simspad-results``, or a ``results.csv`` written by another tool), where the leaderboard goes by
+    default. Nothing of it is deleted: empty set."""
+    if (path / "leaderboard.html").is_file() or (path / "results.csv").is_file():
+        return set()
+    try:
+        meta = json.loads((path / "results.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return set() if isinstance(meta, dict) and meta.get("format") == "simspad-results" else None
 
 
 def build_leaderboard(results_dirs, out_dir=None) -> Path:
-    """Write leaderboard.md/.csv/.html (and the PNGs the markdown links) into ``out_dir``; return the HTML path."""
+    """Write leaderboard.md/.csv/.html (and the PNGs the markdown links) into ``out_dir``; return the HTML path.
+
+    ``out_dir`` (default: the first results directory) must be new, empty, a results folder or a leaderboard
+    folder (:mod:`simspad.io.output_dirs`); it is locked while written, other files in it are kept, and the files
+    of the previous leaderboard that this one no longer has (strips of recordings gone) are deleted.
+    """
     results_dirs = [Path(d) for d in results_dirs]
     if not results_dirs:
         raise SimSpadError("at least one results directory is required", field="RESULTS_DIR")
-    out_dir = ensure_writable_dir(Path(out_dir) if out_dir is not None else results_dirs[0])
+    out_dir = Path(out_dir) if out_dir is not None else results_dirs[0]
+    previous = claim_output_dir(out_dir, "leaderboard", legacy=_legacy_output, also=("evaluate", "score")) or set()
+    with owned_dir_in_place(out_dir, "leaderboard", legacy=_legacy_output, also=("evaluate", "score")):
+        written = _write_leaderboard(results_dirs, out_dir)
+        remove_stale_files(out_dir, previous - written)
+        write_marker(out_dir, "leaderboard", written)
+    return out_dir / "leaderboard.html"
+
+
+def _write_leaderboard(results_dirs: list[Path], out_dir: Path) -> set[str]:
+    """Write the leaderboard's files into ``out_dir``; return their paths relative to it."""
+    written = set()
+
+    def write_bytes(rel: str, data: bytes) -> None:
+        with atomic_path(out_dir / rel) as tmp:
+            tmp.write_bytes(data)
+        written.add(rel)
+
     board = build_board(results_dirs)
     plots = {"PSNR versus lux": plot_psnr_vs_lux(board), "PSNR versus bandwidth": plot_psnr_vs_bandwidth(board)}
     plot_files = {}
     for name, png in plots.items():
         fname = f"leaderboard_{slug(name.lower().replace(' ', '_'))}.png"
-        _write_bytes(out_dir / fname, png)
+        write_bytes(fname, png)
         plot_files[name] = fname
     regime = build_regime(board)
     regime_figures = [("PSNR over light level and image speed", "psnr", plot_regime_heatmaps(board, regime)),
@@ -47,9 +79,10 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
             continue
         regime_pngs[name] = png
         regime_files[name] = f"leaderboard_regime_{short}.png"
-        _write_bytes(out_dir / regime_files[name], png)
+        write_bytes(regime_files[name], png)
     with atomic_path(out_dir / "leaderboard_regime.csv") as tmp:
         write_regime_csv(tmp, board, regime)
+    written.add("leaderboard_regime.csv")
     strips, strip_files = [], []
     keys, strip_note = strip_keys(board)
     for scene, lux, rec in keys:
@@ -59,15 +92,16 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
         title = f"{scene} @ {lux:g} lx ({rec})"
         strips.append((title, png))
         fname = f"leaderboard_strips/{slug(Path(rec).stem)}.png"
+        check_no_link(out_dir, fname)  # a link named leaderboard_strips would take the strips elsewhere
         (out_dir / "leaderboard_strips").mkdir(exist_ok=True)
-        _write_bytes(out_dir / fname, png)
+        write_bytes(fname, png)
         strip_files.append((title, fname))
     with atomic_path(out_dir / "leaderboard.csv") as tmp:
         write_csv_table(tmp, board)
     with atomic_path(out_dir / "leaderboard.md") as tmp:
         tmp.write_text(render_markdown(board, plot_files, strip_files, regime, regime_files, strip_note),
                        encoding="utf-8")
-    html_path = out_dir / "leaderboard.html"
-    with atomic_path(html_path) as tmp:
+    with atomic_path(out_dir / "leaderboard.html") as tmp:
         tmp.write_text(render_html(board, plots, strips, regime, regime_pngs, strip_note), encoding="utf-8")
-    return html_path
+    written |= {"leaderboard.csv", "leaderboard.md", "leaderboard.html"}
+    return written

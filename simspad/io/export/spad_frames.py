@@ -16,14 +16,17 @@ The directory ``out`` holds::
                          (ph s⁻¹ m⁻²), channel Z = depth (m) when the recording has it
     gt/timestamps.csv    index, t_s
 
+    .simspad-export-npz  the marker: the files this export wrote (simspad.io.output_dirs)
+
 Groups the recording lacks are left out. Everything streams: SPAD bits go into the ``.npz`` (an uncompressed ZIP
-of ``.npy`` files, written entry by entry) in chunks of binary frames, images one at a time. The directory is
-built under a temporary name and renamed when complete.
+of ``.npy`` files, written entry by entry) in chunks of binary frames, images one at a time. The files are built
+in a temporary folder and moved in when complete; an existing ``out`` must be empty or an earlier npz export.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import zipfile
 from pathlib import Path
 
@@ -32,9 +35,10 @@ import numpy as np
 import tifffile
 
 from simspad.errors import SimSpadError
-from simspad.io.atomic import atomic_path
 from simspad.io.export import FRAME_FORMATS, PACKINGS
 from simspad.io.exr import write_exr
+from simspad.io.output_dirs import owned_output_dir
+
 #: Binary frames read and written per step.
 SPAD_CHUNK_BINS = 4096
 
@@ -48,7 +52,8 @@ def export_spad_frames(rec, out: Path, *, packing: str = "packed", frames_format
     rec : Recording
         An open recording.
     out : Path
-        The directory to create (replaced if it exists).
+        The directory: new, empty, or an earlier npz export (whose files are replaced; files others put there
+        are kept, see :mod:`simspad.io.output_dirs`). Anything else is refused.
     packing : {"packed", "unpacked"}
         SPAD bits as stored (8 pixels a byte) or one uint8 0/1 per pixel (8× larger).
     frames_format : {"png", "tiff"}
@@ -66,8 +71,7 @@ def export_spad_frames(rec, out: Path, *, packing: str = "packed", frames_format
         raise SimSpadError("the recording has no /spad, /frames or /gt group to export", path=rec.path)
     meta = {"layout": "simspad-export-npz", "layout_version": 1, "recording": str(rec.path), "attrs": rec.attrs,
             "groups": {}}
-    with atomic_path(out) as tmp:
-        tmp.mkdir(parents=True)
+    with owned_output_dir(out, "export-npz", legacy=_legacy_export) as tmp:
         if rec.has("spad"):
             _write_spad(rec, tmp / "spad.npz", packing, chunk_bins)
             meta["groups"]["spad"] = {"file": "spad.npz", "packing": packing, "bitorder": "little",
@@ -81,6 +85,22 @@ def export_spad_frames(rec, out: Path, *, packing: str = "packed", frames_format
                                                                   "Z": "depth, m"}}
         (tmp / "metadata.json").write_text(json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n")
     return out
+
+
+_LEGACY_FILES = re.compile(r"(metadata\.json|spad\.npz|frames/[^/]+|gt/[^/]+)")
+
+
+def _legacy_export(path: Path) -> set[str] | None:
+    """The files of an npz export written before folders carried a marker (its ``metadata.json`` names the
+    layout), else None."""
+    try:
+        meta = json.loads((path / "metadata.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(meta, dict) or meta.get("layout") != "simspad-export-npz":
+        return None
+    return {rel for p in path.rglob("*") if p.is_file() and not p.is_symlink()
+            and _LEGACY_FILES.fullmatch(rel := p.relative_to(path).as_posix())}
 
 
 def _npy_entry(zf: zipfile.ZipFile, name: str, dtype, shape: tuple, chunks) -> None:
