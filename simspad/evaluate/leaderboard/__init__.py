@@ -13,7 +13,11 @@ Output (in ``--out``, default the first results directory):
 - ``leaderboard.html`` one file with everything embedded (plots and strips as base64 PNG, inline CSS, no
                        script and no external asset).
 
-Best value per column is marked (bold; highest PSNR, lowest bandwidth). Methods scored without absolute scale
+Methods scored on every recording of the board are ranked by mean PSNR; only they are compared: the best value
+per column, cell and mean is marked (bold; highest PSNR, lowest bandwidth) among them, and only they enter the
+Pareto fronts and the S+E − F+E difference. A method scored on part of the recordings is shown, unranked and
+never marked. The board states this rule, and lists per light level the PSNR at a bandwidth budget (the Pareto
+front of PSNR against bandwidth). Methods scored without absolute scale
 (after the log-affine alignment of :mod:`simspad.evaluate.metrics`) are marked †; a glossary under the tables
 names every method and explains the marks. Every user-supplied string (method names, labels,
 scenes, sensors, error messages) is escaped with :func:`html.escape` in HTML and markdown (and ``|``

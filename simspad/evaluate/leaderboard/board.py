@@ -180,8 +180,14 @@ def method_label(board: Board, method: str) -> str:
 
 
 def best_ranked(board: Board, values: dict[str, float], higher: bool = True) -> set[str]:
-    """:func:`best_of` among the methods that cover every recording (all methods when none does)."""
-    ranked = set(board.ranked()) or set(values)
+    """:func:`best_of` among the methods that cover every recording of the board (none when no method does).
+
+    Every method that covers the board was scored on the same recordings, so any column, cell or mean compares
+    like with like among them; a partial method is never eligible, even in a column it happens to cover (its
+    presence there says nothing about the rest of the board, and a 1-recording submission bolded beside complete
+    methods reads as a claim it cannot back).
+    """
+    ranked = set(board.ranked())
     return best_of({k: v for k, v in values.items() if k in ranked}, higher)
 
 

@@ -11,10 +11,13 @@ from simspad.evaluate.leaderboard.board import Board, failed_runs, lux_levels
 from simspad.evaluate.leaderboard.glossary import glossary_rows, notes
 from simspad.evaluate.leaderboard.regime import Regime, regime_cells, single_speed_note
 from simspad.evaluate.leaderboard.tables import (
+    BUDGET_NOTE,
     MTF_NOTE,
     PREAMBLE,
     REGIME_NOTE,
+    budget_tables,
     lux_table,
+    ranking_rule,
     star_tables,
     summary_cells,
     table_cells,
@@ -45,9 +48,15 @@ def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[
                     strip_note: str | None = None) -> str:
     lheader, lbody = lux_table(board)
     out = ["# SimSPAD leaderboard", "", md_escape(PREAMBLE), "",
-           "## Summary over all recordings", "", md_table(*summary_cells(board), 3), "",
-           "## Mean PSNR per light level (dB)", "", md_table(lheader, lbody, 1), "",
-           "## Methods × scenes at each light level (PSNR, dB)", ""]
+           "## Summary over all recordings", "", md_escape(ranking_rule(board)), "",
+           md_table(*summary_cells(board), 3), "",
+           "## Mean PSNR per light level (dB)", "", md_table(lheader, lbody, 1), ""]
+    budgets = budget_tables(board)
+    if budgets:
+        out += ["## PSNR at a bandwidth budget", "", md_escape(BUDGET_NOTE), ""]
+        for lux, (header, body) in budgets:
+            out += [f"### {lux:g} lx", "", md_table(header, body, 3), ""]
+    out += ["## Methods × scenes at each light level (PSNR, dB)", ""]
     for lux in lux_levels(board):
         out += [f"### {lux:g} lx", "", md_table(*table_cells(board, lux)), ""]
     stars = star_tables(board)

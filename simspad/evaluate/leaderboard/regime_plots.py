@@ -96,8 +96,8 @@ def plot_pareto_cells(board: Board, regime: Regime) -> bytes:
     for i, k in enumerate(regime.speeds):
         for j, lux in enumerate(regime.luxes):
             ax = axes[nr - 1 - i, j]  # fastest speed on top, as on the heatmaps
-            pts = cell_points(regime, lux, k)
-            front = pareto_front(pts)
+            pts = cell_points(regime, lux, k, ranked_only=False)  # partial methods drawn, never on the front
+            front = pareto_front(cell_points(regime, lux, k))
             for m, (b, q) in pts.items():
                 st = styles[m]
                 ax.plot([b], [q], st["marker"], color=st["color"], markersize=6,

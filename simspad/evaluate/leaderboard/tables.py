@@ -1,18 +1,20 @@
 """The leaderboard's tables: cells of (text, is_best) for the renderers, and ``leaderboard.csv``.
 
-Best value per column is marked: highest PSNR, SSIM and MTF50, lowest bandwidth. Texts are unescaped; the HTML and
-markdown renderers escape them.
+Best value per column is marked among the methods scored on every recording of the board (:func:`best_ranked`):
+highest PSNR, SSIM and MTF, lowest bandwidth. :func:`budget_tables` ranks by PSNR at a bandwidth budget, per light
+level (the Pareto front of PSNR against bandwidth). Texts are unescaped; the HTML and markdown renderers escape
+them.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 from simspad.evaluate.metrics import STAR_FREQS_CYC_PX
 from simspad.evaluate.leaderboard.board import (
     Board,
-    best_of,
     best_ranked,
     fmt_bandwidth,
     fmt_number,
@@ -21,6 +23,7 @@ from simspad.evaluate.leaderboard.board import (
     mean_finite,
     method_label,
 )
+from simspad.evaluate.leaderboard.regime import pareto_front
 
 
 def summary_cells(board: Board):
@@ -61,7 +64,8 @@ def table_cells(board: Board, lux: float | None = None):
 
     header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s"] + \
         [s if lux is not None else f"{s} @ {l:g} lx" for s, l in columns] + ["Mean PSNR"]
-    best_cols = [best_of({m: board.psnr.get((m, s, l), float("nan")) for m in board.methods}) for s, l in columns]
+    best_cols = [best_ranked(board, {m: board.psnr.get((m, s, l), float("nan")) for m in board.methods})
+                 for s, l in columns]
     best_bw = best_ranked(board, {m: bandwidth(m, "khz") for m in board.methods}, higher=False)
     best_bits = best_ranked(board, {m: bandwidth(m, "bits") for m in board.methods}, higher=False)
     best_mean = best_ranked(board, {m: mean_psnr(m) for m in board.methods})
@@ -99,7 +103,7 @@ def star_tables(board: Board) -> list[tuple[str, tuple]]:
     for key, title in STAR_FIGURES:
         vals = {(m, s, l): board.star.get((m, s, l), {}).get(key, float("nan")) for m in board.methods
                 for s, l in cols}
-        best = [best_of({m: vals[(m, s, l)] for m in board.methods}) for s, l in cols]
+        best = [best_ranked(board, {m: vals[(m, s, l)] for m in board.methods}) for s, l in cols]
         header = ["Method"] + [f"{s} @ {l:g} lx" for s, l in cols]
         body = [[(method_label(board, m), False)] + [(fmt_number(vals[(m, s, l)], 3), m in best[j])
                                                      for j, (s, l) in enumerate(cols)] for m in board.methods]
@@ -114,6 +118,55 @@ STAR_FIGURES = tuple((f"mtf_at_{f:.2f}_cyc_px".replace(".", "p"), f"MTF at {f:g}
 PREAMBLE = ("PSNR in dB on display-mapped frames (white point: 99th percentile of the ground truth over the "
             "sequence; sRGB transfer curve). Best per column in bold, among the methods scored on every recording. "
             "Bandwidth: mean over recordings. Marks († and partial) are explained in the glossary at the end.")
+
+
+def ranking_rule(board: Board) -> str:
+    """The sentence stating how the summary ranks methods, with this board's recording count."""
+    n = len(board.recordings)
+    return (f"Rank: the methods scored on all {n} recordings of this board, by mean PSNR over those recordings "
+            "(highest first; equal means share the name order). Only they compete: every bold mark in every table "
+            "is the best among them, so a column, cell or mean is only ever compared over the same recordings. "
+            "A method scored on fewer recordings (partial k/N) is shown, after them, without a rank and never in "
+            "bold. The rank ignores bandwidth: the best PSNR within a bandwidth budget is in the section PSNR at a "
+            "bandwidth budget.")
+
+
+BUDGET_NOTE = ("Per light level, the methods no other ranked method beats on both PSNR and bandwidth (the Pareto "
+               "front), cheapest first: with a budget of at least the listed bandwidth, the method on that row is "
+               "the best PSNR affordable. PSNR is the mean over the scenes at that level (as in the table per "
+               "light level), bandwidth the mean over its recordings, kHz of readouts per pixel. Only methods "
+               "scored on every recording take part.")
+
+
+def budget_fronts(board: Board) -> dict[float, list[tuple[str, float, float, float]]]:
+    """Per lux level, the Pareto front of PSNR against bandwidth among the ranked methods, cheapest first:
+    ``[(method, bandwidth kHz/px, bits/px/s, PSNR dB), ...]``; PSNR increases along it."""
+    means = lux_means(board)
+    out = {}
+    for lux in lux_levels(board):
+        pts, bits = {}, {}
+        for m in board.ranked():
+            i = board.info[m]
+            b, q = mean_finite(i["bw_khz_by_lux"].get(lux, [])), means[m][lux]
+            if math.isfinite(b) and math.isfinite(q) and b > 0:
+                pts[m], bits[m] = (b, q), mean_finite(i["bw_bits_by_lux"].get(lux, []))
+        front = pareto_front(pts)
+        out[lux] = sorted(((m, pts[m][0], bits[m], pts[m][1]) for m in front), key=lambda x: (x[1], -x[3], x[0]))
+    return out
+
+
+def budget_tables(board: Board) -> list[tuple[float, tuple]]:
+    """(lux, (header, body)) of the PSNR-at-a-bandwidth-budget table of each light level; [] when no ranked
+    method has both figures. Cells are (text, is_best) with is_best False (each row is the best at its budget)."""
+    header = ["Budget ≥ (kHz/px)", "Best method within budget", "Sensors", "Bits/px/s", "PSNR (dB)"]
+    out = []
+    for lux, front in budget_fronts(board).items():
+        if not front:
+            continue
+        body = [[(fmt_bandwidth(b), False), (method_label(board, m), False), (board.info[m]["sensors"], False),
+                 (fmt_bandwidth(bits), False), (fmt_number(q), False)] for m, b, bits, q in front]
+        out.append((lux, (header, body)))
+    return out
 
 REGIME_NOTE = ("PSNR (dB, mean over scenes) per light level and image speed. Speed rows are the dataset's speed "
                "factors, labelled with the median image speed measured in their recordings (px/s). The last row "
