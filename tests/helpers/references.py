@@ -95,45 +95,49 @@ def akf_events_reference(state, ev_t, ev_pix, ev_dl, p) -> None:
         t_last_ev[i] = t
 
 
-def event_levels(batch, n_pix: int, instants_s: np.ndarray) -> np.ndarray:
-    """ℓ per pixel at each instant: the sum of the steps of the pixel's events at or before it, [n_pix, K]."""
-    k = np.searchsorted(instants_s, batch.t_s, side="left")  # first instant at or after the event
-    lev = np.zeros((n_pix, instants_s.size + 1))
-    np.add.at(lev, (batch.pix, k), batch.dl)
-    return np.cumsum(lev, axis=1)[:, :-1]
-
-
 def nedi_reference(counts, n_bins: int, bin_t_s, batch, t_ref_s: float, q_m2: float, gate_s: float,
-                   dcr_cps: float = 0.0) -> np.ndarray:
+                   dcr_cps: float = 0.0, block_px: int = 8192) -> np.ndarray:
     """Φ(f) per pixel solving E[S](Φ) = min(S, n − 1) (Φ = 0 for S = 0), [H, W]; SciPy's vectorised bracketing
-    root finder (``scipy.optimize.elementwise``) on ln Φ, to a relative 10⁻¹² of Φ.
+    root finder (``scipy.optimize.elementwise.find_root``) on ln Φ, to 10⁻¹³ in ln Φ, ``block_px`` pixels at a
+    time (memory: block_px × n_bins values).
 
     The count is capped at n − 1 as in :func:`simspad.methods.spad_response.estimate_flux` (a saturated pixel has
-    no finite solution)."""
+    no finite solution). The dark count rate must be small enough that every counted pixel has a positive flux."""
     from scipy.optimize import elementwise  # deferred: SciPy ≥ 1.15, only the reference needs it
 
     shape = counts.shape
     s = np.minimum(np.asarray(counts, np.float64).reshape(-1), n_bins - 1.0)
     n_pix = s.size
     bin_t_s = np.asarray(bin_t_s, np.float64)
-    if batch is None or len(batch.t_s) == 0:
-        a = np.ones((n_pix, bin_t_s.size))
-    else:
-        lev = event_levels(batch, n_pix, bin_t_s)
+    events = batch is not None and len(batch.t_s) > 0
+    if events:
         lref = np.bincount(batch.pix, weights=batch.dl * (batch.t_s <= t_ref_s), minlength=n_pix)
-        a = np.exp(lev - lref[:, None])
+        kb = np.searchsorted(bin_t_s, batch.t_s, side="left")  # first bin sampled at or after the event
     dark = np.broadcast_to(np.asarray(dcr_cps, np.float64), shape).reshape(-1)
-    live = s > 0
     out = np.zeros(n_pix)
-    if live.any():
-        a_l, s_l, d_l = a[live], s[live], dark[live]
 
-        def excess(u, a_l, s_l, d_l):  # E[S] − S at Φ = e^u, increasing in u
-            return np.sum(-np.expm1(-(q_m2 * np.exp(u)[..., None] * a_l + d_l[..., None]) * gate_s), axis=-1) - s_l
+    for p0 in range(0, n_pix, block_px):
+        p1 = min(p0 + block_px, n_pix)
+        live = np.nonzero(s[p0:p1] > 0)[0] + p0
+        if live.size == 0:
+            continue
+        if events:  # ℓ(t_k) − ℓ(f) of the block's pixels: their events' steps summed from each one's first bin on
+            sel = (batch.pix >= p0) & (batch.pix < p1)
+            lev = np.zeros((p1 - p0, bin_t_s.size + 1))
+            np.add.at(lev, (batch.pix[sel] - p0, kb[sel]), batch.dl[sel])
+            a = np.exp(np.cumsum(lev, axis=1)[:, :-1] - lref[p0:p1, None])[live - p0]
+        else:
+            a = np.ones((live.size, bin_t_s.size))
+        lo = np.full(live.size, np.log(1e-30 / (q_m2 * gate_s)))
+        hi = np.log(1e3 / (q_m2 * gate_s * a.min(axis=1)))
 
-        lo = np.full(s_l.size, np.log(1e-30 / (q_m2 * gate_s)))
-        hi = np.full(s_l.size, np.log(1e3 / (q_m2 * gate_s * a_l.min(axis=1))))
-        res = elementwise.find_root(excess, (lo, hi), args=(a_l, s_l, d_l),
+        def excess(u, j, a=a, live=live):  # E[S] − S at Φ = e^u, increasing in u, for the pixels live[j]
+            j = j.astype(np.int64)  # the solver passes only the unconverged pixels, with their j
+            rate = q_m2 * np.exp(u)[:, None] * a[j] + dark[live[j], None]
+            return np.sum(-np.expm1(-rate * gate_s), axis=1) - s[live[j]]
+
+        res = elementwise.find_root(excess, (lo, hi), args=(np.arange(live.size),),
                                     tolerances=dict(xatol=1e-13, xrtol=0.0))
+        assert np.all(res.success), "the reference's bracket does not hold every root"
         out[live] = np.exp(res.x)
     return out.reshape(shape)
