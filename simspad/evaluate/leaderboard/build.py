@@ -11,7 +11,13 @@ from simspad.errors import SimSpadError
 from simspad.evaluate.leaderboard.board import build_board
 from simspad.evaluate.leaderboard.html_page import render_html
 from simspad.evaluate.leaderboard.markdown_page import render_markdown
-from simspad.evaluate.leaderboard.plots import plot_psnr_vs_bandwidth, plot_psnr_vs_lux, strip_keys, strip_png
+from simspad.evaluate.leaderboard.plots import (
+    plot_psnr_vs_bandwidth,
+    plot_psnr_vs_lux,
+    strip_keys,
+    strip_png,
+    strip_title,
+)
 from simspad.evaluate.leaderboard.regime import build_regime, write_regime_csv
 from simspad.evaluate.leaderboard.regime_plots import plot_pareto_cells, plot_regime_heatmaps, plot_spad_minus_frames
 from simspad.evaluate.leaderboard.tables import write_csv_table
@@ -53,10 +59,10 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
     strips, strip_files = [], []
     keys, strip_note = strip_keys(board)
     for scene, lux, rec in keys:
-        png = strip_png(board, rec, scene, lux)
+        title = strip_title(board, rec)
+        png = strip_png(board, rec, scene, lux, title)
         if png is None:
             continue
-        title = f"{scene} @ {lux:g} lx ({rec})"
         strips.append((title, png))
         fname = f"leaderboard_strips/{slug(Path(rec).stem)}.png"
         (out_dir / "leaderboard_strips").mkdir(exist_ok=True)

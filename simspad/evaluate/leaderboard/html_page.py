@@ -12,13 +12,17 @@ from simspad.evaluate.leaderboard.board import Board, failed_runs, lux_levels
 from simspad.evaluate.leaderboard.glossary import glossary_rows, notes
 from simspad.evaluate.leaderboard.regime import Regime, regime_cells, single_speed_note
 from simspad.evaluate.leaderboard.tables import (
+    ABOUT_NOTE,
+    BANDWIDTH_NOTE,
     BUDGET_NOTE,
     MTF_NOTE,
     PREAMBLE,
     REGIME_NOTE,
+    about_cells,
     budget_tables,
     lux_table,
     ranking_rule,
+    recording_cells,
     star_tables,
     summary_cells,
     table_cells,
@@ -63,8 +67,10 @@ def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, b
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              "<title>SimSPAD leaderboard</title>", f"<style>{_CSS}</style></head><body>",
              "<h1>SimSPAD leaderboard</h1>", f"<p class=\"note\">{html.escape(PREAMBLE)}</p>",
+             "<h2>About this board</h2>", f"<p class=\"note\">{html.escape(ABOUT_NOTE)}</p>",
+             _html_table(*about_cells(board)), _html_table(*recording_cells(board)),
              "<h2>Summary over all recordings</h2>", f"<p class=\"note\">{html.escape(ranking_rule(board))}</p>",
-             _html_table(*summary_cells(board)),
+             _html_table(*summary_cells(board)), f"<p class=\"note\">{html.escape(BANDWIDTH_NOTE)}</p>",
              "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody)]
     budgets = budget_tables(board)
     if budgets:

@@ -12,7 +12,8 @@ import math
 import numpy as np
 from PIL import Image
 
-from simspad.evaluate.leaderboard.board import Board, lux_levels, lux_means, method_label
+from simspad.evaluate.leaderboard.board import Board, lux_levels, lux_means, method_label, scene_column
+from simspad.io.results_dir import read_csv
 
 #: Most recordings shown as image strips (spread evenly over the sorted recordings).
 MAX_STRIPS = 15
@@ -127,8 +128,42 @@ def strip_keys(board: Board) -> tuple[list[tuple[str, float, str]], str | None]:
     return chosen, note
 
 
-def strip_png(board: Board, recording: str, scene: str, lux: float) -> bytes | None:
-    """GT beside each method at the chosen instant, from the crops saved by evaluate/score."""
+def strip_instant_s(board: Board, recording: str) -> float:
+    """The instant (s) the strip of ``recording`` shows: the frame evaluate and score save as images (the middle
+    evaluation instant, ``n_frames // 2``), read from a source directory's ``frames.csv``; NaN when none has it."""
+    for m in board.methods:
+        row = next((r for r in board.rows if r["method"] == m and r["recording"] == recording
+                    and not r.get("error")), None)
+        src = board.sources.get((m, recording))
+        if row is None or src is None or not (src / "frames.csv").is_file():
+            continue
+        frame = int(row.get("n_frames", 0)) // 2
+        for f in _frames_csv(src / "frames.csv"):
+            if f.get("method") == m and f.get("recording") == recording and f.get("frame") == frame:
+                t = f.get("t_s")
+                if isinstance(t, float) and math.isfinite(t):
+                    return t
+    return float("nan")
+
+
+def _frames_csv(path) -> list[dict]:
+    try:
+        return read_csv(path)
+    except (OSError, UnicodeDecodeError, ValueError):
+        return []
+
+
+def strip_title(board: Board, recording: str) -> str:
+    """``fan ×16 @ 1 lx, t = 15.0 ms (recordings/fan/fan_1lx_x16.h5)``: scene, speed, light level, instant shown."""
+    row = next(r for r in board.rows if r["recording"] == recording)
+    t = strip_instant_s(board, recording)
+    when = f", t = {1e3 * t:.1f} ms" if math.isfinite(t) else ""
+    return f"{scene_column(row)} @ {float(row['lux']):g} lx{when} ({recording})"
+
+
+def strip_png(board: Board, recording: str, scene: str, lux: float, title: str | None = None) -> bytes | None:
+    """GT beside each method at the chosen instant, from the crops saved by evaluate/score; ``title`` above it
+    (default: scene and lux)."""
     plt = _pyplot()
 
     panels = []
@@ -153,5 +188,5 @@ def strip_png(board: Board, recording: str, scene: str, lux: float) -> bytes | N
         ax.imshow(img, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
         ax.set_title(plot_text(title), fontsize=8)
         ax.axis("off")
-    fig.suptitle(plot_text(f"{scene} @ {lux:g} lx"), fontsize=9)
+    fig.suptitle(plot_text(title or f"{scene} @ {lux:g} lx"), fontsize=9)
     return figure_png(fig)

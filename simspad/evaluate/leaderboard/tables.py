@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 
 from simspad.evaluate.metrics import STAR_FREQS_CYC_PX
@@ -120,6 +121,50 @@ PREAMBLE = ("PSNR in dB on display-mapped frames (white point: 99th percentile o
             "Bandwidth: mean over recordings. Marks († and partial) are explained in the glossary at the end.")
 
 
+def _text(v, fmt: str = "{}") -> str:
+    return "–" if v is None or v == "" or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+def about_cells(board: Board):
+    """What this board ranks: one row per results directory (kind, dataset, spec hash, seed, SimSPAD version,
+    creation time, evaluation rate); – where its ``results.json`` does not say."""
+    header = ["Results", "Kind", "Dataset", "Spec hash", "Seed", "SimSPAD", "Created (UTC)", "Evaluation rate (Hz)",
+              "Methods"]
+    body = [[(_text(a["directory"]), False), (_text(a["kind"]), False), (_text(a["dataset"]), False),
+             (_text(a["spec_hash"], "{:.12}"), False), (_text(a["seed"]), False), (_text(a["simspad_version"]), False),
+             (_text(a["created_utc"]), False), (_text(a["rate_hz"], "{:g}"), False),
+             (", ".join(a["methods"]) or "–", False)] for a in board.about]
+    return header, body
+
+
+def recording_cells(board: Board):
+    """Every recording of the board: scene, speed, lux, resolution, duration, seed and render settings (samples
+    per pixel, keyframe spacing); – where no ``results.json`` says."""
+    header = ["Recording", "Scene", "Speed", "Lux", "Resolution (px)", "Duration (ms)", "Seed", "Render spp",
+              "Keyframes ≤ px apart", "Keyframe rate ≥ (Hz)"]
+    rows = {r["recording"]: r for r in board.rows}
+    body = []
+    for rec in board.recordings:
+        i = board.recording_info.get(rec, {})
+        r = rows.get(rec, {})
+        k = i.get("speed_factor", r.get("speed_factor"))
+        size = f"{i['width']}×{i['height']}" if "width" in i and "height" in i else "–"
+        dur = i.get("duration_s")
+        body.append([(rec, False), (_text(i.get("scene", r.get("scene"))), False), (_text(k, "×{:g}"), False),
+                     (_text(i.get("lux", r.get("lux")), "{:g}"), False), (size, False),
+                     (_text(1e3 * dur if isinstance(dur, (int, float)) else None, "{:g}"), False),
+                     (_text(i.get("seed")), False), (_text(i.get("spp")), False),
+                     (_text(i.get("max_flow_px"), "{:g}"), False), (_text(i.get("min_rate_hz"), "{:g}"), False)])
+    return header, body
+
+
+ABOUT_NOTE = ("What this board ranks: the results directories merged (a later one overrides an earlier one's "
+              "method on the same recording) and every recording scored, with what the results say of it. A "
+              "recording's render settings are its samples per pixel and the keyframe spacing (at most that many "
+              "pixels of image motion between rendered keyframes, at least that rate); the ground truth is "
+              "interpolated between keyframes.")
+
+
 def ranking_rule(board: Board) -> str:
     """The sentence stating how the summary ranks methods, with this board's recording count."""
     n = len(board.recordings)
@@ -129,6 +174,14 @@ def ranking_rule(board: Board) -> str:
             "A method scored on fewer recordings (partial k/N) is shown, after them, without a rank and never in "
             "bold. The rank ignores bandwidth: the best PSNR within a bandwidth budget is in the section PSNR at a "
             "bandwidth budget.")
+
+
+BANDWIDTH_NOTE = ("Bandwidth: what a method reads from its sensors per pixel and second, as readouts (kHz per "
+                  "pixel) and as bits (Bits/px/s), summed over the sensors it uses. A SPAD binary frame is one "
+                  "1-bit readout; an aggregate of n SPAD frames one readout of ceil(log2(n + 1)) bits; a "
+                  "conventional frame one readout of its bit depth (12 bits for the blackfly_s preset); an event "
+                  "one 32-bit readout. Reading every SPAD frame of the SwissSPAD2 preset is 97.7 kHz and 97 700 "
+                  "bits/px/s; aggregating 244 of them, 0.4 kHz and 3200 bits/px/s.")
 
 
 BUDGET_NOTE = ("Per light level, the methods no other ranked method beats on both PSNR and bandwidth (the Pareto "
@@ -189,9 +242,18 @@ def csv_safe(value):
     return value
 
 
+def csv_column(scene_column: str, lux: float) -> str:
+    """The ASCII ``leaderboard.csv`` header of a (scene column, lux) PSNR column: ``psnr_db_fan_x16_100lx``.
+
+    Spaces and other non-identifier characters become ``_``, ``×k`` becomes ``xk``, so the header is one token that
+    any CSV reader, spreadsheet or dataframe library takes as written."""
+    name = re.sub(r"[^A-Za-z0-9.]+", "_", scene_column.replace("×", "x")).strip("_")
+    return f"psnr_db_{name}_{lux:g}lx"
+
+
 def write_csv_table(path: Path, board: Board) -> None:
     cols = ["method", "label", "sensors", "absolute_scale", "bandwidth_khz_per_pixel",
-            "bandwidth_bits_per_pixel_s"] + [f"psnr_db[{s}@{l:g}lx]" for s, l in board.columns] + \
+            "bandwidth_bits_per_pixel_s"] + [csv_column(s, l) for s, l in board.columns] + \
         ["mean_psnr_db", "mean_ssim", "errors"]
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
