@@ -3,11 +3,17 @@
 Input: one or more results directories written by ``simspad evaluate`` or ``simspad score`` (``results.csv``,
 ``images/``). When two directories score the same method on the same recording, the later one wins.
 
+The board describes itself first ("About this board"): the results directories it merges, with the dataset name,
+spec hash, seed, SimSPAD version, creation time and evaluation rate their ``results.json`` give, and every
+recording with its scene, speed, lux, resolution, duration, seed and render settings. Image strips are titled
+with scene, speed, lux and the instant shown.
+
 Output (in ``--out``, default the first results directory):
 
 - ``leaderboard.md``   the table (methods × scenes × lux, PSNR in dB, with bandwidth), the mean PSNR per lux
                        level, the plots and the image strips as PNG files beside it;
-- ``leaderboard.csv``  the same table, one row per method, one column per (scene, lux);
+- ``leaderboard.csv``  the same table, one row per method, one column per (scene, lux) with an ASCII header
+                       (``psnr_db_fan_x16_100lx``);
 - ``leaderboard_regime.csv`` PSNR and bandwidth per method and (lux, speed) cell, Pareto membership, and the best
                        S+E − best F+E difference per cell (:mod:`.regime`);
 - ``leaderboard.html`` one file with everything embedded (plots and strips as base64 PNG, inline CSS, no

@@ -46,7 +46,9 @@ def plot_regime_heatmaps(board: Board, regime: Regime) -> bytes:
     fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, h * nrows + 0.6), squeeze=False,
                              constrained_layout=True)
     grids = [regime.grid(m) for m in regime.methods]
-    finite = np.concatenate([g[np.isfinite(g)] for g in grids] + [np.empty(0)])
+    # the colour scale spans the ranked methods (a partial one's few cells, drawn clipped, cannot stretch it)
+    scaled = [g for m, g in zip(regime.methods, grids) if m in regime.ranked] or grids
+    finite = np.concatenate([g[np.isfinite(g)] for g in scaled] + [np.empty(0)])
     vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     im = None
     for ax, m, g in zip(axes.flat, regime.methods, grids):

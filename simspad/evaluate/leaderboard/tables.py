@@ -180,7 +180,7 @@ BANDWIDTH_NOTE = ("Bandwidth: what a method reads from its sensors per pixel and
                   "pixel) and as bits (Bits/px/s), summed over the sensors it uses. A SPAD binary frame is one "
                   "1-bit readout; an aggregate of n SPAD frames one readout of ceil(log2(n + 1)) bits; a "
                   "conventional frame one readout of its bit depth (12 bits for the blackfly_s preset); an event "
-                  "one 32-bit readout. Reading every SPAD frame of the SwissSPAD2 preset is 97.7 kHz and 97 700 "
+                  "one 32-bit readout. Reading every SPAD frame of the SwissSPAD2 preset is 97.7 kHz and 97 656 "
                   "bits/px/s; aggregating 244 of them, 0.4 kHz and 3200 bits/px/s.")
 
 
