@@ -95,6 +95,8 @@ def test_psnr_at_a_bandwidth_budget_is_the_pareto_front_per_lux(board_dirs, tmp_
     md = (out / "leaderboard.md").read_text()
     section = md.split("## PSNR at a bandwidth budget")[1].split("\n## ")[0]
     assert "Sub" not in section
+    assert (out / "leaderboard_psnr_at_a_bandwidth_budget.png").stat().st_size > 5000
+    assert "![PSNR at a bandwidth budget](leaderboard_psnr_at_a_bandwidth_budget.png)" in md
     rows_100 = [x for x in section.split("### 100 lx")[1].splitlines() if x.startswith("| 0")]
     assert [x.split("|")[2].strip() for x in rows_100] == ["CF (E) †", "AKF (F+E)"]
     assert rows_100[1].split("|")[5].strip() == f"{psnr_model('akf_fe', 100.0, 1.0):.2f}"

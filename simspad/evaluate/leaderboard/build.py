@@ -12,6 +12,7 @@ from simspad.evaluate.leaderboard.board import build_board
 from simspad.evaluate.leaderboard.html_page import render_html
 from simspad.evaluate.leaderboard.markdown_page import render_markdown
 from simspad.evaluate.leaderboard.plots import (
+    plot_budget_fronts,
     plot_psnr_vs_bandwidth,
     plot_psnr_vs_lux,
     strip_keys,
@@ -20,7 +21,7 @@ from simspad.evaluate.leaderboard.plots import (
 )
 from simspad.evaluate.leaderboard.regime import build_regime, write_regime_csv
 from simspad.evaluate.leaderboard.regime_plots import plot_pareto_cells, plot_regime_heatmaps, plot_spad_minus_frames
-from simspad.evaluate.leaderboard.tables import write_csv_table
+from simspad.evaluate.leaderboard.tables import budget_fronts, write_csv_table
 from simspad.io.atomic import atomic_path, ensure_writable_dir
 from simspad.io.results_dir import slug
 
@@ -38,6 +39,9 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
     out_dir = ensure_writable_dir(Path(out_dir) if out_dir is not None else results_dirs[0])
     board = build_board(results_dirs)
     plots = {"PSNR versus lux": plot_psnr_vs_lux(board), "PSNR versus bandwidth": plot_psnr_vs_bandwidth(board)}
+    budget = plot_budget_fronts(board, budget_fronts(board))
+    if budget is not None:
+        plots["PSNR at a bandwidth budget"] = budget
     plot_files = {}
     for name, png in plots.items():
         fname = f"leaderboard_{slug(name.lower().replace(' ', '_'))}.png"

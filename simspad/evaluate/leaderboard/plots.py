@@ -12,7 +12,14 @@ import math
 import numpy as np
 from PIL import Image
 
-from simspad.evaluate.leaderboard.board import Board, lux_levels, lux_means, method_label, scene_column
+from simspad.evaluate.leaderboard.board import (
+    Board,
+    lux_levels,
+    lux_means,
+    mean_finite,
+    method_label,
+    scene_column,
+)
 from simspad.io.results_dir import read_csv
 
 #: Most recordings shown as image strips (spread evenly over the sorted recordings).
@@ -98,6 +105,48 @@ def plot_psnr_vs_bandwidth(board: Board) -> bytes:
     ax.grid(True, which="both", alpha=0.3)
     if ax.lines:
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    return figure_png(fig)
+
+
+def plot_budget_fronts(board: Board, fronts: dict[float, list[tuple[str, float, float, float]]]) -> bytes | None:
+    """PSNR against bandwidth per light level, one panel per lux: every method with both figures (partial ones
+    hollow), the Pareto front of the ranked methods (``fronts``, from :func:`tables.budget_fronts`) ringed and
+    joined by the staircase of the best PSNR within each budget. None when no lux level has a front."""
+    if not any(fronts.values()):
+        return None
+    plt = _pyplot()
+    styles = method_styles(board)
+    means = lux_means(board)
+    luxes = [lux for lux in lux_levels(board) if fronts.get(lux)]
+    fig, axes = plt.subplots(1, len(luxes), figsize=(2.9 * len(luxes) + 2.4, 3.0), squeeze=False,
+                             constrained_layout=True)
+    for ax, lux in zip(axes[0], luxes):
+        on_front = {m for m, *_ in fronts[lux]}
+        for m in board.methods:
+            b = mean_finite(board.info[m]["bw_khz_by_lux"].get(lux, []))
+            q = means[m][lux]
+            if not (math.isfinite(b) and math.isfinite(q) and b > 0):
+                continue
+            st = styles[m]
+            partial = board.is_partial(m)
+            ax.plot([b], [q], st["marker"], color=st["color"], markersize=6,
+                    markerfacecolor="none" if partial else st["color"],
+                    markeredgecolor="k" if m in on_front else st["color"], markeredgewidth=1.4 if m in on_front else 1)
+        ax.step([f[1] for f in fronts[lux]], [f[3] for f in fronts[lux]], where="post", color="k", lw=0.8,
+                alpha=0.6)
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.tick_params(labelsize=7)
+        ax.set_title(f"{lux:g} lx", fontsize=8)
+        ax.set_xlabel("bandwidth budget (kHz per pixel)", fontsize=7)
+    axes[0][0].set_ylabel("best PSNR within budget (dB)", fontsize=7)
+    handles = [plt.Line2D([], [], linestyle="", marker=styles[m]["marker"], color=styles[m]["color"],
+                          markerfacecolor="none" if board.is_partial(m) else styles[m]["color"],
+                          label=plot_text(method_label(board, m))) for m in board.methods]
+    handles.append(plt.Line2D([], [], linestyle="-", color="k", marker="o", markerfacecolor="none",
+                              label="Pareto front of the ranked methods (ringed)"))
+    fig.legend(handles=handles, loc="outside right upper", fontsize=7)
+    fig.suptitle("PSNR at a bandwidth budget, per light level", fontsize=10)
     return figure_png(fig)
 
 

@@ -188,7 +188,8 @@ BUDGET_NOTE = ("Per light level, the methods no other ranked method beats on bot
                "front), cheapest first: with a budget of at least the listed bandwidth, the method on that row is "
                "the best PSNR affordable. PSNR is the mean over the scenes at that level (as in the table per "
                "light level), bandwidth the mean over its recordings, kHz of readouts per pixel. Only methods "
-               "scored on every recording take part.")
+               "scored on every recording take part. The figure PSNR at a bandwidth budget (under Plots) draws "
+               "the same fronts.")
 
 
 def budget_fronts(board: Board) -> dict[float, list[tuple[str, float, float, float]]]:
