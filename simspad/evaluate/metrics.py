@@ -9,8 +9,8 @@ sequence) and ``srgb`` the IEC 61966-2-1 transfer curve (12.92·v below 0.003130
 above; identical to ``colour.cctf_encoding(v, function="sRGB")``).
 
 Methods without an absolute scale (events only) are scored after a per-frame least-squares fit in log space.
-Each side is floored at 10⁻³ of its own frame's 99th percentile (the floor keeps the logarithm finite; 10⁻³ of
-the white point maps to sRGB 0.0129, far below what the display resolves)::
+Each side is floored at 10⁻³ of its own frame's 99th percentile: the floor only keeps the logarithm finite, and
+touches only pixels a thousand times darker than the frame's bright end (about sRGB 0.013 on the display)::
 
     x = ln(max(rec, ε_rec)),  ε_rec = 10⁻³ · p99(rec)        y = ln(max(gt, ε_gt)),  ε_gt = 10⁻³ · p99(gt)
     (a, b) = argmin Σ (a·x + b − y)²   over all pixels:  a = Σ(x − x̄)(y − ȳ) / Σ(x − x̄)²,  b = ȳ − a·x̄

@@ -122,7 +122,14 @@ PREAMBLE = ("PSNR in dB on display-mapped frames (white point: 99th percentile o
 
 
 def _text(v, fmt: str = "{}") -> str:
-    return "–" if v is None or v == "" or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+    """``v`` formatted with ``fmt``; – when absent or not finite; as plain text when ``fmt`` does not fit it (a
+    hand-edited results.json may hold a string where a number belongs: shown, escaped by the renderers)."""
+    if v is None or v == "" or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    try:
+        return fmt.format(v)
+    except (TypeError, ValueError):
+        return str(v)
 
 
 def about_cells(board: Board):
