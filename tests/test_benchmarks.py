@@ -43,3 +43,20 @@ def test_bench_evaluate_times_both_revisions_and_each_methods_first_reconstructi
     for listed in firsts:
         methods = dict(re.findall(r"(\w+) ([\d.]+)s", listed))
         assert {"ni", "qbp"} <= methods.keys(), res.stdout  # the SPAD-only methods (these recordings have no events)
+
+
+@pytest.mark.slow
+def test_bench_akf_times_the_kernel_against_the_vectorised_reference_and_they_agree(child_env):
+    res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_akf.py"), "20000"], capture_output=True, text=True,
+                         timeout=300, env=child_env)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]  # it asserts agreement before timing
+    assert re.search(r"NumPy vectorised : +20,000 events .*states agree to 1e-12", res.stdout), res.stdout
+    assert re.search(r"speed-up +: +[\d.]+x wall", res.stdout), res.stdout
+
+
+@pytest.mark.slow
+def test_bench_nedi_times_the_solver_against_the_vectorised_reference_and_they_agree(child_env):
+    res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_nedi.py"), "24"], capture_output=True, text=True,
+                         timeout=300, env=child_env)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert re.search(r"SciPy vectorised : +576 px .*agree to 1e-9", res.stdout), res.stdout

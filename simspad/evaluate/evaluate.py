@@ -362,11 +362,11 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                 "methods": sorted({t.method for t in tasks}),
                 "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
                                 "lux": e.lux, "speed_factor": e.speed_factor,
-                                "image_speed_px_s": e.image_speed_px_s} for e in entries],
+                                "image_speed_px_s": e.image_speed_px_s, **e.about} for e in entries],
                 "protocol": protocol_metadata(), "timings": timing,
                 **({"params": {m: p for m, p in sorted(method_params.items())
                                if any(t.method == m for t in tasks)}} if method_params else {}),
-                "dataset": {k: (manifest or {}).get(k) for k in ("spec_hash", "seed")}}
+                "dataset": {k: (manifest or {}).get(k) for k in ("name", "spec_hash", "seed")}}
         write_results_dir(tmp, rows, [f for r in results for f in r["frame_rows"]],
                           [m for r in results for m in r["mtf_rows"]], meta)
     return out_dir, rows

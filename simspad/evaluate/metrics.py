@@ -8,11 +8,19 @@ with W the sequence white point (99th percentile of the ground-truth photon irra
 sequence) and ``srgb`` the IEC 61966-2-1 transfer curve (12.92·v below 0.0031308, 1.055·v^(1/2.4) − 0.055
 above; identical to ``colour.cctf_encoding(v, function="sRGB")``).
 
-Methods without an absolute scale (events only) are scored after a per-frame least-squares affine fit in log
-space: with x = ln(max(rec, ε_rec)) and y = ln(max(gt, ε_gt)) over all pixels, (a, b) minimise
-Σ (a·x + b − y)², and the aligned reconstruction is exp(a·x + b). The floors keep the logarithm finite:
-ε_gt = 10⁻³·W (one thousandth of the white point, far below what the display mapping resolves: 10⁻³ maps to
-sRGB 0.0129) and ε_rec = 10⁻³ × the 99th percentile of the reconstruction frame (its scale is arbitrary).
+Methods without an absolute scale (events only) are scored after a per-frame least-squares fit in log space.
+Each side is floored at 10⁻³ of its own frame's 99th percentile: the floor only keeps the logarithm finite, and
+touches only pixels a thousand times darker than the frame's bright end (about sRGB 0.013 on the display)::
+
+    x = ln(max(rec, ε_rec)),  ε_rec = 10⁻³ · p99(rec)        y = ln(max(gt, ε_gt)),  ε_gt = 10⁻³ · p99(gt)
+    (a, b) = argmin Σ (a·x + b − y)²   over all pixels:  a = Σ(x − x̄)(y − ȳ) / Σ(x − x̄)²,  b = ȳ − a·x̄
+    aligned = e^b · rec^a                                 (rec ≤ 0 ↦ 0; for a ≤ 0, e^b · max(rec, ε_rec)^a)
+
+The same relative floor on both sides makes the fit exact on its own family: a reconstruction k·gt^γ (any gain
+k > 0, any contrast γ > 0) has x = γ·y + ln k wherever neither side is floored, so a = 1/γ and b = −ln(k)/γ, and
+the aligned frame is the ground truth itself — a submission of the ground truth (k = γ = 1) scores the PSNR cap
+and SSIM 1 with or without absolute scale. The fit is applied to the reconstruction itself, not to its floored
+copy, so pixels below the floor keep their own values.
 
 PSNR and SSIM are scikit-image's (``peak_signal_noise_ratio``, ``structural_similarity``) with ``data_range=1``
 on the display-mapped frames, computed here with the same arithmetic to the last bit (:func:`psnr_db` in NumPy,
@@ -163,37 +171,38 @@ def _log_floored(img: np.ndarray, eps: float) -> np.ndarray:
     return np.log(np.maximum(np.asarray(img, dtype=np.float64), eps))
 
 
-def log_floor_rec(rec: np.ndarray) -> float:
-    """Floor ε_rec of a reconstruction of arbitrary scale: 10⁻³ × its 99th percentile (> 0)."""
-    p = float(np.percentile(rec, WHITE_PERCENTILE)) if np.size(rec) else 0.0
+def log_floor(img: np.ndarray) -> float:
+    """Log floor of one frame (either side of the fit): 10⁻³ × its 99th percentile (> 0).
+
+    Falls back to 10⁻³ × the largest magnitude, then 10⁻³⁰, for a frame whose 99th percentile is not positive.
+    """
+    img = np.asarray(img, dtype=np.float64)  # float32 and float64 copies of one frame get the same floor
+    p = float(np.percentile(img, WHITE_PERCENTILE)) if img.size else 0.0
     if not (np.isfinite(p) and p > 0):
-        p = float(np.max(np.abs(rec))) if np.size(rec) else 0.0
+        p = float(np.max(np.abs(img))) if img.size else 0.0
     return LOG_FLOOR_REL * p if p > 0 else 1e-30
 
 
-def affine_log_fit(rec: np.ndarray, gt: np.ndarray, white: float | None = None) -> tuple[float, float]:
-    """Least-squares (a, b) of a·ln(rec) + b ≈ ln(gt) over all pixels of one frame.
+def affine_log_fit(rec: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
+    """Least-squares (a, b) of a·ln(rec) + b ≈ ln(gt) over all pixels of one frame, each side floored at 10⁻³ of
+    its own 99th percentile (:func:`log_floor`).
 
     Parameters
     ----------
     rec, gt : ndarray [H,W]
         Reconstruction (any scale) and ground truth (ph s⁻¹ m⁻²).
-    white : float, optional
-        Sequence white point W; the ground-truth floor is 10⁻³·W (default: the frame's own 99th percentile).
 
     Returns
     -------
     (a, b) : floats. A constant reconstruction (zero log-variance) gives a = 0, b = mean(ln gt).
     """
-    if white is None:
-        white = white_point(gt)
-    return _fit_log(_log_floored(rec, log_floor_rec(rec)), gt, white)
+    return _fit_log(_log_floored(rec, log_floor(rec)), gt)
 
 
-def _fit_log(x: np.ndarray, gt: np.ndarray, white: float) -> tuple[float, float]:
+def _fit_log(x: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
     """:func:`affine_log_fit` given the floored log of the reconstruction ``x``."""
     x = x.ravel()
-    y = _log_floored(gt, LOG_FLOOR_REL * white).ravel()
+    y = _log_floored(gt, log_floor(gt)).ravel()
     xm, ym = x.mean(), y.mean()
     dx = x - xm
     sxx = float(dx @ dx)
@@ -201,11 +210,18 @@ def _fit_log(x: np.ndarray, gt: np.ndarray, white: float) -> tuple[float, float]
     return a, float(ym - a * xm)
 
 
-def align_log_affine(rec: np.ndarray, gt: np.ndarray, white: float) -> np.ndarray:
-    """The reconstruction after the per-frame log-space affine fit: exp(a·ln(rec) + b), float32."""
-    x = _log_floored(rec, log_floor_rec(rec))
-    a, b = _fit_log(x, gt, white)
-    return np.exp(a * x + b).astype(np.float32)
+def _apply_fit(rec: np.ndarray, a: float, b: float) -> np.ndarray:
+    """e^b · rec^a (float64), with rec ≤ 0 mapped to 0; for a ≤ 0 (no monotone map), e^b · max(rec, ε_rec)^a."""
+    rec = np.asarray(rec, dtype=np.float64)
+    if a > 0:
+        return np.exp(b) * np.power(np.maximum(rec, 0.0), a)
+    return np.exp(a * _log_floored(rec, log_floor(rec)) + b)
+
+
+def align_log_affine(rec: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """The reconstruction after the per-frame log-space affine fit: e^b · rec^a (:func:`affine_log_fit`), float64."""
+    a, b = affine_log_fit(rec, gt)
+    return _apply_fit(rec, a, b)
 
 
 # -- image metrics ---------------------------------------------------------------------------------------------
@@ -246,9 +262,8 @@ def frame_scores(rec: np.ndarray, gt: np.ndarray, white: float, absolute_scale: 
     rec = np.asarray(rec, dtype=np.float64)
     a = b = float("nan")
     if not absolute_scale:
-        x = _log_floored(rec, log_floor_rec(rec))  # floor and logarithm taken once for the fit and its use
-        a, b = _fit_log(x, gt, white)
-        rec = np.exp(a * x + b)
+        a, b = affine_log_fit(rec, gt)
+        rec = _apply_fit(rec, a, b)
     rd = display_map(rec, white)
     gd = display_map(gt, white) if gt_display is None else gt_display
     return {"psnr_db": psnr_db(rd, gd), "ssim": ssim(rd, gd), "fit_a": a, "fit_b": b}

@@ -232,7 +232,7 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None,
         psnrs.append(s["psnr_db"])
         ssims.append(s["ssim"])
         if star or i == image_frame:
-            shown = img if absolute_scale else metrics.align_log_affine(img, gt, white)
+            shown = img if absolute_scale else metrics.align_log_affine(img, gt)
         if star:
             geometry, h_gt = gt_cache.star(int(idx[i]), gt)
             mtf.add(*metrics.mtf_siemens(shown, gt, geometry=geometry, gt_harmonics=h_gt))
@@ -271,8 +271,8 @@ def protocol_metadata() -> dict:
     """The protocol constants recorded in ``results.json``."""
     return {"white_point": f"{metrics.WHITE_PERCENTILE:g}th percentile of ground truth over the sequence",
             "display": "clip(x / W, 0, 1) then the sRGB transfer curve",
-            "alignment": "methods without absolute scale: per-frame least-squares a*ln(rec)+b ~ ln(gt), "
-                         f"floors {metrics.LOG_FLOOR_REL:g}*W (gt) and {metrics.LOG_FLOOR_REL:g}*p99(rec)",
+            "alignment": "methods without absolute scale: per-frame least-squares a*ln(rec)+b ~ ln(gt), each "
+                         f"side floored at {metrics.LOG_FLOOR_REL:g}*p99 of its own frame; aligned = exp(b)*rec^a",
             "psnr": f"scikit-image, data_range=1, capped at {metrics.PSNR_CAP_DB:g} dB, mean over frames",
             "ssim": "scikit-image, data_range=1, 7x7 window, mean over frames",
             "image_crop_px": CROP_PX}

@@ -34,6 +34,8 @@ class RecordingEntry:
     """The recording's ``speed_factor`` root attribute (1 for recordings made before the speed axis)."""
     image_speed_px_s: float = float("nan")
     """The recording's ``image_speed_px_s_p50`` root attribute: median image motion (px/s); NaN when absent."""
+    about: dict = field(default_factory=dict)
+    """What the recording is, for the leaderboard's description of itself (:func:`recording_about`)."""
 
 
 def read_manifest(dataset_dir: Path) -> dict | None:
@@ -116,8 +118,29 @@ def fill_entry(entry: RecordingEntry) -> RecordingEntry:
         entry.lux = float(rec.lux)
         entry.speed_factor = _attr_float(rec.attrs, "speed_factor", 1.0, entry.path)
         entry.image_speed_px_s = _attr_float(rec.attrs, "image_speed_px_s_p50", float("nan"), entry.path)
+        entry.about = recording_about(rec)
     entry.key = recording_key(entry.sequence, entry.lux, entry.speed_factor)
     return entry
+
+
+def recording_about(rec) -> dict:
+    """Resolution, duration, seed, dataset name and render settings (spp, keyframe spacing) of a recording, from
+    its root attributes and spec; keys whose value the recording does not state are left out."""
+    attrs = rec.attrs
+    out = {"width": int(rec.width), "height": int(rec.height)}
+    for name, kind in (("duration_s", float), ("seed", int), ("dataset", str), ("gt_rate_hz", float)):
+        try:
+            if name in attrs:
+                out[name] = kind(attrs[name])
+        except (TypeError, ValueError):
+            pass
+    spec = rec.spec if isinstance(rec.spec, dict) else {}
+    seq = spec.get("sequence") if isinstance(spec.get("sequence"), dict) else {}
+    for name in ("spp", "max_flow_px", "min_rate_hz", "interpolation"):
+        v = seq.get(name)
+        if isinstance(v, (int, float, str)) and not isinstance(v, bool):
+            out[name] = v
+    return out
 
 
 def spec_evaluation(manifest: dict | None, entry: RecordingEntry | None) -> dict:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import simspad
 from simspad.cli import main
 from simspad.evaluate import metrics
 from simspad.evaluate.recordings import list_recordings
@@ -86,7 +87,8 @@ def test_leaderboard_escapes_user_text_and_is_self_contained(evaluated, tmp_path
     assert "src=\"http" not in page and "href=" not in page and page.count("data:image/png;base64,") >= 3
     md = (out / "leaderboard.md").read_text()
     assert "<script" not in md and "†" in md
-    evil_line = next(line for line in md.splitlines() if "alert" in line)
+    summary = md.split("## Summary over all recordings")[1].split("\n## ")[0]
+    evil_line = next(line for line in summary.splitlines() if "alert" in line)
     assert "†" in evil_line and "**100.00**" not in evil_line  # the power law aligns away, the 1-px shift does not
     ni_line = next(line for line in md.splitlines() if "| NI (S) | S |" in line)
     assert "**0.4**" in ni_line  # lowest bandwidth marked best
@@ -106,12 +108,12 @@ def test_leaderboard_renders_in_headless_chromium(evaluated, tmp_path):
     shot = tmp_path / "shot.png"
     subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                     "--disable-component-update", "--disable-sync", "--no-first-run",
-                    f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}", "--window-size=1200,1600",
+                    f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}", "--window-size=1200,4000",
                     (out / "leaderboard.html").resolve().as_uri()],
                    capture_output=True, timeout=120, check=False)
     assert shot.is_file() and shot.stat().st_size > 0
     img = np.asarray(Image.open(shot).convert("L"), np.float64)
-    assert img.shape == (1600, 1200) and img.std() > 5.0
+    assert img.shape == (4000, 1200) and img.std() > 5.0  # tall: the description and tables come first
     # tables (dark text rows) and plots (coloured lines) are drawn: many distinct grey levels on the page
     assert len(np.unique(img.astype(np.uint8))) > 50
     rgb = np.asarray(Image.open(shot).convert("RGB"), np.int32)
@@ -131,3 +133,42 @@ def test_recordings_are_found_with_and_without_a_manifest(evaluated, tmp_path):
     entries, manifest = list_recordings(plain)
     assert manifest is None
     assert [e.rel for e in entries] == ["recordings/ramp/ramp_100lx.h5", "recordings/ramp/ramp_10lx.h5"]
+
+
+def test_the_board_describes_itself(evaluated, tmp_path):
+    """Issue 36, goal 3: what the board ranks (dataset, spec hash, seed, version, date, each recording's resolution,
+    duration and seed), the bandwidth accounting in words, strip titles with scene, speed, lux and instant, ASCII
+    csv headers, and markdown without HTML entities for quotes."""
+    root, ds = evaluated
+    out = tmp_path / "board"
+    assert main(["leaderboard", str(root / "res_ni"), str(root / "res_evil"), "--out", str(out)]) == 0
+    md = (out / "leaderboard.md").read_text()
+    about = md.split("## About this board")[1].split("\n## ")[0]
+    ni_line = next(line for line in about.splitlines() if line.startswith("| res\\_ni "))
+    cells = [c.strip() for c in ni_line.strip("|").split("|")]
+    assert cells[1:5] == ["evaluate", "eval", "x", "0"]  # kind, dataset name, spec hash, seed (tests' manifest)
+    assert cells[5] == simspad.__version__ and cells[6].startswith("20") and cells[7] == "1000"
+    rec_line = next(line for line in about.splitlines() if line.startswith("| recordings/ramp/ramp\\_100lx.h5"))
+    cells = [c.strip() for c in rec_line.strip("|").split("|")]
+    assert cells[1:7] == ["ramp", "×1", "100", "32×24", "10", "100"]  # scene, speed, lux, W×H, ms, seed
+    assert "a conventional frame one readout of its bit depth" in md and "one 32-bit readout" in md
+    strips = [line for line in md.splitlines() if line.startswith("![ramp")]
+    # the saved image is the middle of the 11 evaluation instants (0 to 10 ms at 1 kHz): 5 ms
+    assert strips and all("ramp @ " in s and "lx, t = 5.0 ms (recordings/ramp/" in s for s in strips), strips
+    assert "&#x27;" not in md and "&quot;" not in md
+    header = (out / "leaderboard.csv").read_text().splitlines()[0]
+    assert header.isascii() and " " not in header and "psnr_db_ramp_10lx" in header
+    page = (out / "leaderboard.html").read_text()
+    assert "About this board" in page and "32×24" in page
+
+
+def test_the_winner_line_follows_cell_edges():
+    from simspad.evaluate.leaderboard.regime_plots import sign_boundary
+
+    diff = np.array([[1.0, -2.0, -1.0],
+                     [3.0, 2.0, np.nan]])
+    segments = set(sign_boundary(diff))
+    # between (0,0)+ and (0,1)−: the vertical edge x = 0.5 of row 0; between (0,1)− and (1,1)+: the horizontal
+    # edge y = 0.5 of column 1; nothing next to the missing cell (1,2) nor between cells of one sign
+    assert segments == {((0.5, -0.5), (0.5, 0.5)), ((0.5, 0.5), (1.5, 0.5))}
+    assert all(x % 1 == 0.5 or y % 1 == 0.5 for (x, y), _ in segments)  # every endpoint on a cell edge

@@ -1,6 +1,8 @@
-"""AKF: covariance and state follow the closed-form equations; convergence to a step; event noise terms."""
+"""AKF: covariance and state follow the closed-form equations; convergence to a step; event noise terms, by hand
+and against the independent vectorised reference (tests/helpers/references.py)."""
 
 import numpy as np
+import pytest
 
 from simspad.methods.akf import (
     AkfParams,
@@ -13,6 +15,7 @@ from simspad.methods.akf import (
 )
 from simspad.methods.event_batches import EventBatch
 from simspad.methods.windows import Measurement
+from tests.helpers.references import akf_events_reference, event_noise_reference
 
 
 def test_relaxation_matches_closed_form_and_composes():
@@ -112,3 +115,65 @@ def test_events_track_motion_between_frames():
     out = np.stack(list(akf_frames(iter([m0]), times, shape, AkfParams(q_threshold=0.0), None)))
     truth = c * np.floor(times / 0.25e-3 + 1e-9)
     assert np.allclose(np.log(out[:, 0, 0]), truth, atol=1e-5)
+
+
+def test_event_noise_with_every_term_on_and_all_eight_neighbours_firing():
+    """Hand-computed P after one event of the centre of a 3×3 array whose eight neighbours all fired, each at its
+    own time: the isolation term takes the latest of the eight (the bottom-right one, so a neighbourhood missing a
+    row or a column is caught), and the photoreceptor term is (c·τ/(τ + Δt))² with τ ≠ Δt."""
+    W, H = 3, 3
+    n = W * H
+    # neighbours' last events (s); the centre (index 4) last fired at 14 ms; the latest neighbour is index 8
+    t_last = np.array([0.011, 0.004, 0.012, 0.009, 0.014, 0.013, 0.006, 0.010, 0.0175])
+    tau = np.full(n, 2e-3)  # photoreceptor time constant of the centre: 2 ms
+    P = np.full(n, 0.1)
+    L = np.zeros(n)
+    LF = np.full(n, 0.5)
+    Rinv = np.full(n, 40.0)
+    t_upd = np.full(n, 0.012)
+    t, dl = 0.019, -0.2
+    sp, siso, sref, win, qthr = 0.005, 0.03, 0.05, 0.010, 0.03 ** 2
+    akf_events(FilterArrays(L, P, LF, Rinv, t_upd, t_last, tau), EventArrays(np.array([t]), np.array([4]),
+                                                                           np.array([dl])),
+               EventUpdateParams(W, H, sp, siso, sref, win, qthr, True))
+    dt, dtp = t - 0.012, t - 0.014  # since the centre's last update, since its last event (5 ms < 10 ms window)
+    p_relaxed = 1.0 / (1.0 / 0.1 + 40.0 * dt)
+    l_relaxed = 0.5 + (p_relaxed / 0.1) * (0.0 - 0.5)
+    expected = (p_relaxed + sp * dt  # relaxation and process noise
+                + qthr  # threshold mismatch
+                + siso * (t - 0.0175)  # isolation: the latest of the eight neighbours, 1.5 ms before
+                + sref * dtp  # refractory: the centre fired 5 ms before, inside the window
+                + (dl * 2e-3 / (2e-3 + dtp)) ** 2)  # photoreceptor: the step lags by τ/(τ + Δt) = 2/7 of it
+    assert P[4] == pytest.approx(expected, rel=1e-14)
+    assert L[4] == pytest.approx(l_relaxed + dl, rel=1e-14) and LF[4] == pytest.approx(0.5 + dl, rel=1e-14)
+    assert t_last[4] == t and np.all(P[np.arange(n) != 4] == 0.1)
+
+
+def _random_state(H, W, seed):
+    r = np.random.default_rng(seed)
+    n = H * W
+    return FilterArrays(r.normal(30.0, 1.0, n), r.uniform(0.01, 0.1, n), r.normal(30.0, 1.0, n),
+                        r.uniform(0.0, 500.0, n), np.zeros(n), r.uniform(-0.01, 0.0, n), r.uniform(1e-4, 5e-3, n))
+
+
+def test_event_kernel_matches_the_independent_vectorised_reference():
+    """A dense random stream on a 9×11 array (every pixel fires ~30 times within 50 ms: refractory bursts, all
+    eight neighbours active, simultaneous events) with every noise term on, against the vectorised reference of
+    tests/helpers/references.py. Same operations per pixel in the same order: agreement to 10⁻¹² relative."""
+    H, W = 9, 11
+    rng = np.random.default_rng(0)
+    n_ev = 3000
+    t = np.sort(rng.uniform(0.0, 0.05, n_ev))
+    t[100:110] = t[100]  # simultaneous events: Δt = 0 for the relaxation
+    pix = rng.integers(0, H * W, n_ev)
+    dl = np.where(rng.random(n_ev) < 0.5, 0.2, -0.15)
+    params = EventUpdateParams(W, H, 0.005, 0.03, 0.05, 0.010, 0.03 ** 2, True)
+    got, ref = _random_state(H, W, 1), _random_state(H, W, 1)
+    akf_events(got, EventArrays(t, pix, dl), params)
+    akf_events_reference(ref, t, pix, dl, params)
+    for name, a, b in zip(FilterArrays._fields, got, ref):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=0, err_msg=name)
+    # the stream exercises what it claims: bursts inside the refractory window and the bandwidth term's weight
+    q, rank = event_noise_reference(t, pix, dl, _random_state(H, W, 1).t_last_ev, got.tau_pr, W, H, params)
+    assert rank.max() >= 20 and (np.diff(t) == 0).any()
+    assert np.ptp(q) > 0.01

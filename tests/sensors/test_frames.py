@@ -45,6 +45,28 @@ def test_photon_transfer_recovers_emva_parameters(overrides):
     assert r.qe == pytest.approx(params.qe, rel=0.03)
 
 
+def test_quantisation_rounds_to_the_nearest_dn_and_clips_exactly():
+    """With no photons, no read noise and no dark current the electrons are the DSNU map itself, so every DN is
+    known: round(K·e⁻ + black) to the nearest integer, then clipped to [0, 2^bits − 1]. Each fraction below
+    is 1/64 off a half, so truncation or a half-DN offset changes half the pixels."""
+    params = dataclasses.replace(FrameParams(), read_noise_e=0.0, dark_current_e_s=0.0, gain_dn_per_e=0.25,
+                                 black_level_dn=40.0)
+    k = np.arange(64)
+    analog = 40.0 + k / 8 + 1 / 64  # fractions 1/64, 9/64, ... never a tie
+    dsnu = ((analog - 40.0) / 0.25).reshape(8, 8)
+    pattern = frames.FixedPattern(prnu_gain=np.ones((8, 8)), dsnu_e=dsnu)
+    dn = frames.expose(np.zeros((8, 8)), 1e-3, pattern, params, np.random.default_rng(0))
+    expected = 40 + (k + 4) // 8  # k/8 + 1/64 rounds up exactly when k mod 8 ≥ 4
+    np.testing.assert_array_equal(dn.reshape(-1), expected)
+    assert dn.dtype == np.uint16
+    assert dn.mean() - analog.mean() == pytest.approx(0.5 - 1 / 64 - 7 / 16)  # the mean rounding error: 3/64
+    # the clip at both ends of the ADC range: far below 0 and far above 2^12 − 1
+    edges = frames.FixedPattern(prnu_gain=np.ones((1, 2)), dsnu_e=np.array([[-1000.0, 1e5]]))
+    out = frames.expose(np.zeros((1, 2)), 1e-3, edges, dataclasses.replace(params, full_well_e=1e9),
+                        np.random.default_rng(0))
+    np.testing.assert_array_equal(out, [[0, frames.dn_max(params)]])
+
+
 def test_photon_transfer_detects_a_wrong_gain():
     """The analysis is sensitive: a camera with 10 % more gain is measured as such (not the preset)."""
     params = dataclasses.replace(FrameParams(), gain_dn_per_e=0.39 * 1.1)
@@ -82,7 +104,7 @@ def test_simulate_frames_flat_field_statistics_and_attrs(tmp_path):
     expected_dn = params.gain_dn_per_e * mean_e + params.black_level_dn
     # per-frame mean over 768 pixels: σ ≈ K·sqrt(mean_e + (PRNU·mean_e)²)/sqrt(768)
     sigma = params.gain_dn_per_e * np.sqrt(mean_e + (params.prnu * mean_e) ** 2 + params.read_noise_e ** 2)
-    assert abs(dn.mean() - expected_dn) < 5 * sigma / np.sqrt(dn.size) + 0.5
+    assert abs(dn.mean() - expected_dn) < 5 * sigma / np.sqrt(dn.size)  # no slack: rounding is unbiased
     assert dn.var(axis=0).mean() == pytest.approx(params.gain_dn_per_e ** 2 * (mean_e + params.read_noise_e ** 2)
                                                    + 1 / 12, rel=0.1)
 

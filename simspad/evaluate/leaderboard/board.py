@@ -44,6 +44,10 @@ class Board:
     """Every recording any method was scored on, or that a scored submission left out."""
     star: dict[tuple[str, str, float], dict[str, float]] = field(default_factory=dict)
     """Siemens-star figures (``mtf*_cyc_px`` columns of results.csv) per (method, scene column, lux)."""
+    about: list[dict] = field(default_factory=list)
+    """Per results directory, what its ``results.json`` says it is (:func:`results_about`), in input order."""
+    recording_info: dict[str, dict] = field(default_factory=dict)
+    """Per recording, what a ``results.json`` says of it (resolution, duration, seed, render settings)."""
 
     def coverage(self, method: str) -> int:
         """How many recordings of the board ``method`` was scored on (failed runs not counted)."""
@@ -111,6 +115,34 @@ def missing_recordings(results_dirs) -> set[str]:
     return out
 
 
+def _results_json(d) -> dict:
+    try:
+        meta = json.loads((Path(d) / "results.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
+def results_about(results_dirs) -> tuple[list[dict], dict[str, dict]]:
+    """What each results directory's ``results.json`` says it is — kind (evaluate or score), dataset name, spec
+    hash, seed, SimSPAD version, creation time, evaluation rate, methods — and what it says of each recording
+    (the later directory wins). Missing or unreadable metadata gives empty values, never an error: the board
+    still shows the scores, and says what it does not know."""
+    about, recordings = [], {}
+    for d in results_dirs:
+        meta = _results_json(d)
+        ds = meta.get("dataset") if isinstance(meta.get("dataset"), dict) else {}
+        about.append({"directory": Path(d).name, "kind": meta.get("kind"), "dataset": ds.get("name"),
+                      "spec_hash": ds.get("spec_hash"), "seed": ds.get("seed"),
+                      "simspad_version": meta.get("simspad_version"), "created_utc": meta.get("created_utc"),
+                      "rate_hz": meta.get("rate_hz"),
+                      "methods": [str(m) for m in meta.get("methods", []) if isinstance(m, str)]})
+        for r in meta.get("recordings", []) if isinstance(meta.get("recordings"), list) else []:
+            if isinstance(r, dict) and isinstance(r.get("recording"), str):
+                recordings[r["recording"]] = r
+    return about, recordings
+
+
 def mean_finite(values) -> float:
     v = [x for x in values if isinstance(x, float) and math.isfinite(x)]
     return float(np.mean(v)) if v else float("nan")
@@ -159,7 +191,8 @@ def build_board(results_dirs) -> Board:
     methods = sorted(info, key=lambda k: (len(info[k]["recordings"]) < len(recordings),
                                           -(info[k]["psnr_mean"]) if math.isfinite(info[k]["psnr_mean"])
                                           else math.inf, k))
-    return Board(rows, methods, columns, info, psnr, sources, mtf, recordings, star)
+    about, recording_info = results_about(results_dirs)
+    return Board(rows, methods, columns, info, psnr, sources, mtf, recordings, star, about, recording_info)
 
 
 def best_of(values: dict[str, float], higher: bool = True) -> set[str]:
@@ -180,8 +213,14 @@ def method_label(board: Board, method: str) -> str:
 
 
 def best_ranked(board: Board, values: dict[str, float], higher: bool = True) -> set[str]:
-    """:func:`best_of` among the methods that cover every recording (all methods when none does)."""
-    ranked = set(board.ranked()) or set(values)
+    """:func:`best_of` among the methods that cover every recording of the board (none when no method does).
+
+    Every method that covers the board was scored on the same recordings, so any column, cell or mean compares
+    like with like among them; a partial method is never eligible, even in a column it happens to cover (its
+    presence there says nothing about the rest of the board, and a 1-recording submission bolded beside complete
+    methods reads as a claim it cannot back).
+    """
+    ranked = set(board.ranked())
     return best_of({k: v for k, v in values.items() if k in ranked}, higher)
 
 

@@ -12,10 +12,17 @@ from simspad.errors import SimSpadError
 from simspad.evaluate.leaderboard.board import build_board
 from simspad.evaluate.leaderboard.html_page import render_html
 from simspad.evaluate.leaderboard.markdown_page import render_markdown
-from simspad.evaluate.leaderboard.plots import plot_psnr_vs_bandwidth, plot_psnr_vs_lux, strip_keys, strip_png
+from simspad.evaluate.leaderboard.plots import (
+    plot_budget_fronts,
+    plot_psnr_vs_bandwidth,
+    plot_psnr_vs_lux,
+    strip_keys,
+    strip_png,
+    strip_title,
+)
 from simspad.evaluate.leaderboard.regime import build_regime, write_regime_csv
 from simspad.evaluate.leaderboard.regime_plots import plot_pareto_cells, plot_regime_heatmaps, plot_spad_minus_frames
-from simspad.evaluate.leaderboard.tables import write_csv_table
+from simspad.evaluate.leaderboard.tables import budget_fronts, write_csv_table
 from simspad.io.atomic import atomic_path
 from simspad.io.output_dirs import check_no_link, claim_output_dir, owned_dir_in_place, remove_stale_files, write_marker
 from simspad.io.results_dir import slug
@@ -64,6 +71,9 @@ def _write_leaderboard(results_dirs: list[Path], out_dir: Path) -> set[str]:
 
     board = build_board(results_dirs)
     plots = {"PSNR versus lux": plot_psnr_vs_lux(board), "PSNR versus bandwidth": plot_psnr_vs_bandwidth(board)}
+    budget = plot_budget_fronts(board, budget_fronts(board))
+    if budget is not None:
+        plots["PSNR at a bandwidth budget"] = budget
     plot_files = {}
     for name, png in plots.items():
         fname = f"leaderboard_{slug(name.lower().replace(' ', '_'))}.png"
@@ -86,10 +96,10 @@ def _write_leaderboard(results_dirs: list[Path], out_dir: Path) -> set[str]:
     strips, strip_files = [], []
     keys, strip_note = strip_keys(board)
     for scene, lux, rec in keys:
-        png = strip_png(board, rec, scene, lux)
+        title = strip_title(board, rec)
+        png = strip_png(board, rec, scene, lux, title)
         if png is None:
             continue
-        title = f"{scene} @ {lux:g} lx ({rec})"
         strips.append((title, png))
         fname = f"leaderboard_strips/{slug(Path(rec).stem)}.png"
         check_no_link(out_dir, fname)  # a link named leaderboard_strips would take the strips elsewhere

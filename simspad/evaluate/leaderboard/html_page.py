@@ -12,10 +12,17 @@ from simspad.evaluate.leaderboard.board import Board, failed_runs, lux_levels
 from simspad.evaluate.leaderboard.glossary import glossary_rows, notes
 from simspad.evaluate.leaderboard.regime import Regime, regime_cells, single_speed_note
 from simspad.evaluate.leaderboard.tables import (
+    ABOUT_NOTE,
+    BANDWIDTH_NOTE,
+    BUDGET_NOTE,
     MTF_NOTE,
     PREAMBLE,
     REGIME_NOTE,
+    about_cells,
+    budget_tables,
     lux_table,
+    ranking_rule,
+    recording_cells,
     star_tables,
     summary_cells,
     table_cells,
@@ -60,9 +67,17 @@ def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, b
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              "<title>SimSPAD leaderboard</title>", f"<style>{_CSS}</style></head><body>",
              "<h1>SimSPAD leaderboard</h1>", f"<p class=\"note\">{html.escape(PREAMBLE)}</p>",
-             "<h2>Summary over all recordings</h2>", _html_table(*summary_cells(board)),
-             "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody),
-             "<h2>Methods × scenes at each light level (PSNR, dB)</h2>"]
+             "<h2>About this board</h2>", f"<p class=\"note\">{html.escape(ABOUT_NOTE)}</p>",
+             _html_table(*about_cells(board)), _html_table(*recording_cells(board)),
+             "<h2>Summary over all recordings</h2>", f"<p class=\"note\">{html.escape(ranking_rule(board))}</p>",
+             _html_table(*summary_cells(board)), f"<p class=\"note\">{html.escape(BANDWIDTH_NOTE)}</p>",
+             "<h2>Mean PSNR per light level (dB)</h2>", _html_table(lheader, lbody)]
+    budgets = budget_tables(board)
+    if budgets:
+        parts += ["<h2>PSNR at a bandwidth budget</h2>", f"<p class=\"note\">{html.escape(BUDGET_NOTE)}</p>"]
+        for lux, table in budgets:
+            parts += [f"<h3>{lux:g} lx</h3>", _html_table(*table)]
+    parts.append("<h2>Methods × scenes at each light level (PSNR, dB)</h2>")
     for lux in lux_levels(board):
         parts += [f"<h3>{lux:g} lx</h3>", _html_table(*table_cells(board, lux))]
     stars = star_tables(board)

@@ -11,10 +11,17 @@ from simspad.evaluate.leaderboard.board import Board, failed_runs, lux_levels
 from simspad.evaluate.leaderboard.glossary import glossary_rows, notes
 from simspad.evaluate.leaderboard.regime import Regime, regime_cells, single_speed_note
 from simspad.evaluate.leaderboard.tables import (
+    ABOUT_NOTE,
+    BANDWIDTH_NOTE,
+    BUDGET_NOTE,
     MTF_NOTE,
     PREAMBLE,
     REGIME_NOTE,
+    about_cells,
+    budget_tables,
     lux_table,
+    ranking_rule,
+    recording_cells,
     star_tables,
     summary_cells,
     table_cells,
@@ -27,7 +34,10 @@ _MD_SPECIAL = "\\`*_[]|"
 
 
 def md_escape(text: str) -> str:
-    text = html.escape(str(text)).replace("\n", " ")
+    """``text`` for a markdown cell or line: &, < and > as entities (no raw HTML; quotes stay as typed, since they
+    mean nothing to markdown and an entity such as ``&#x27;`` reads badly in the source), markdown's syntax
+    characters backslash-escaped, newlines as spaces."""
+    text = html.escape(str(text), quote=False).replace("\n", " ")
     return "".join("\\" + c if c in _MD_SPECIAL else c for c in text)
 
 
@@ -45,9 +55,17 @@ def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[
                     strip_note: str | None = None) -> str:
     lheader, lbody = lux_table(board)
     out = ["# SimSPAD leaderboard", "", md_escape(PREAMBLE), "",
-           "## Summary over all recordings", "", md_table(*summary_cells(board), 3), "",
-           "## Mean PSNR per light level (dB)", "", md_table(lheader, lbody, 1), "",
-           "## Methods × scenes at each light level (PSNR, dB)", ""]
+           "## About this board", "", md_escape(ABOUT_NOTE), "", md_table(*about_cells(board), 9), "",
+           md_table(*recording_cells(board), 2), "",
+           "## Summary over all recordings", "", md_escape(ranking_rule(board)), "",
+           md_table(*summary_cells(board), 3), "", md_escape(BANDWIDTH_NOTE), "",
+           "## Mean PSNR per light level (dB)", "", md_table(lheader, lbody, 1), ""]
+    budgets = budget_tables(board)
+    if budgets:
+        out += ["## PSNR at a bandwidth budget", "", md_escape(BUDGET_NOTE), ""]
+        for lux, (header, body) in budgets:
+            out += [f"### {lux:g} lx", "", md_table(header, body, 3), ""]
+    out += ["## Methods × scenes at each light level (PSNR, dB)", ""]
     for lux in lux_levels(board):
         out += [f"### {lux:g} lx", "", md_table(*table_cells(board, lux)), ""]
     stars = star_tables(board)

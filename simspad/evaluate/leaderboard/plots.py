@@ -12,7 +12,15 @@ import math
 import numpy as np
 from PIL import Image
 
-from simspad.evaluate.leaderboard.board import Board, lux_levels, lux_means, method_label
+from simspad.evaluate.leaderboard.board import (
+    Board,
+    lux_levels,
+    lux_means,
+    mean_finite,
+    method_label,
+    scene_column,
+)
+from simspad.io.results_dir import read_csv
 
 #: Most recordings shown as image strips (spread evenly over the sorted recordings).
 MAX_STRIPS = 15
@@ -100,6 +108,48 @@ def plot_psnr_vs_bandwidth(board: Board) -> bytes:
     return figure_png(fig)
 
 
+def plot_budget_fronts(board: Board, fronts: dict[float, list[tuple[str, float, float, float]]]) -> bytes | None:
+    """PSNR against bandwidth per light level, one panel per lux: every method with both figures (partial ones
+    hollow), the Pareto front of the ranked methods (``fronts``, from :func:`tables.budget_fronts`) ringed and
+    joined by the staircase of the best PSNR within each budget. None when no lux level has a front."""
+    if not any(fronts.values()):
+        return None
+    plt = _pyplot()
+    styles = method_styles(board)
+    means = lux_means(board)
+    luxes = [lux for lux in lux_levels(board) if fronts.get(lux)]
+    fig, axes = plt.subplots(1, len(luxes), figsize=(2.9 * len(luxes) + 2.4, 3.0), squeeze=False,
+                             constrained_layout=True)
+    for ax, lux in zip(axes[0], luxes):
+        on_front = {m for m, *_ in fronts[lux]}
+        for m in board.methods:
+            b = mean_finite(board.info[m]["bw_khz_by_lux"].get(lux, []))
+            q = means[m][lux]
+            if not (math.isfinite(b) and math.isfinite(q) and b > 0):
+                continue
+            st = styles[m]
+            partial = board.is_partial(m)
+            ax.plot([b], [q], st["marker"], color=st["color"], markersize=6,
+                    markerfacecolor="none" if partial else st["color"],
+                    markeredgecolor="k" if m in on_front else st["color"], markeredgewidth=1.4 if m in on_front else 1)
+        ax.step([f[1] for f in fronts[lux]], [f[3] for f in fronts[lux]], where="post", color="k", lw=0.8,
+                alpha=0.6)
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.tick_params(labelsize=7)
+        ax.set_title(f"{lux:g} lx", fontsize=8)
+        ax.set_xlabel("bandwidth budget (kHz per pixel)", fontsize=7)
+    axes[0][0].set_ylabel("best PSNR within budget (dB)", fontsize=7)
+    handles = [plt.Line2D([], [], linestyle="", marker=styles[m]["marker"], color=styles[m]["color"],
+                          markerfacecolor="none" if board.is_partial(m) else styles[m]["color"],
+                          label=plot_text(method_label(board, m))) for m in board.methods]
+    handles.append(plt.Line2D([], [], linestyle="-", color="k", marker="o", markerfacecolor="none",
+                              label="Pareto front of the ranked methods (ringed)"))
+    fig.legend(handles=handles, loc="outside right upper", fontsize=7)
+    fig.suptitle("PSNR at a bandwidth budget, per light level", fontsize=10)
+    return figure_png(fig)
+
+
 def strip_keys(board: Board) -> tuple[list[tuple[str, float, str]], str | None]:
     """(scene, lux, recording) of the recordings shown as image strips, and a note when some are left out.
 
@@ -127,8 +177,42 @@ def strip_keys(board: Board) -> tuple[list[tuple[str, float, str]], str | None]:
     return chosen, note
 
 
-def strip_png(board: Board, recording: str, scene: str, lux: float) -> bytes | None:
-    """GT beside each method at the chosen instant, from the crops saved by evaluate/score."""
+def strip_instant_s(board: Board, recording: str) -> float:
+    """The instant (s) the strip of ``recording`` shows: the frame evaluate and score save as images (the middle
+    evaluation instant, ``n_frames // 2``), read from a source directory's ``frames.csv``; NaN when none has it."""
+    for m in board.methods:
+        row = next((r for r in board.rows if r["method"] == m and r["recording"] == recording
+                    and not r.get("error")), None)
+        src = board.sources.get((m, recording))
+        if row is None or src is None or not (src / "frames.csv").is_file():
+            continue
+        frame = int(row.get("n_frames", 0)) // 2
+        for f in _frames_csv(src / "frames.csv"):
+            if f.get("method") == m and f.get("recording") == recording and f.get("frame") == frame:
+                t = f.get("t_s")
+                if isinstance(t, float) and math.isfinite(t):
+                    return t
+    return float("nan")
+
+
+def _frames_csv(path) -> list[dict]:
+    try:
+        return read_csv(path)
+    except (OSError, UnicodeDecodeError, ValueError):
+        return []
+
+
+def strip_title(board: Board, recording: str) -> str:
+    """``fan ×16 @ 1 lx, t = 15.0 ms (recordings/fan/fan_1lx_x16.h5)``: scene, speed, light level, instant shown."""
+    row = next(r for r in board.rows if r["recording"] == recording)
+    t = strip_instant_s(board, recording)
+    when = f", t = {1e3 * t:.1f} ms" if math.isfinite(t) else ""
+    return f"{scene_column(row)} @ {float(row['lux']):g} lx{when} ({recording})"
+
+
+def strip_png(board: Board, recording: str, scene: str, lux: float, title: str | None = None) -> bytes | None:
+    """GT beside each method at the chosen instant, from the crops saved by evaluate/score; ``title`` above it
+    (default: scene and lux)."""
     plt = _pyplot()
 
     panels = []
@@ -153,5 +237,5 @@ def strip_png(board: Board, recording: str, scene: str, lux: float) -> bytes | N
         ax.imshow(img, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
         ax.set_title(plot_text(title), fontsize=8)
         ax.axis("off")
-    fig.suptitle(plot_text(f"{scene} @ {lux:g} lx"), fontsize=9)
+    fig.suptitle(plot_text(title or f"{scene} @ {lux:g} lx"), fontsize=9)
     return figure_png(fig)

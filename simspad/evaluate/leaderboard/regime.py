@@ -9,7 +9,10 @@ and time of the image motion; NaN for recordings made before the speed axis, whi
 - the Pareto front of PSNR against bandwidth: the methods no other method beats on both (higher or equal PSNR at
   lower or equal bandwidth, one strictly).
 
-Methods covering only part of the board take part in their cells like any other (a cell compares like with like).
+Only the methods scored on every recording of the board (:meth:`Board.ranked`) compete in a cell: they are the
+ones eligible for the best mark, the best S+E and F+E of the difference and the Pareto front, so every comparison
+is over the same recordings. A method covering only part of the board is shown with its PSNR where it has one,
+never marked best, and written with ``pareto_front`` false.
 """
 
 from __future__ import annotations
@@ -41,16 +44,18 @@ class Regime:
     bandwidth_khz: dict[tuple[str, float, float], float]
     methods: list[str]
     sensors: dict[str, str]
+    ranked: list[str]
+    """The methods scored on every recording of the board: the only ones compared (best, difference, front)."""
 
     def grid(self, method: str) -> np.ndarray:
         """PSNR [speed, lux] of ``method`` (NaN where it has no result)."""
         return np.array([[self.psnr.get((method, lux, k), math.nan) for lux in self.luxes] for k in self.speeds])
 
     def best_of_sensors(self, sensors: str) -> tuple[np.ndarray, np.ndarray]:
-        """Per cell [speed, lux]: the highest PSNR among methods using ``sensors`` and that method's name."""
+        """Per cell [speed, lux]: the highest PSNR among ranked methods using ``sensors`` and that method's name."""
         psnr = np.full((len(self.speeds), len(self.luxes)), math.nan)
         name = np.full(psnr.shape, "", dtype=object)
-        for m in self.methods:
+        for m in self.ranked:
             if self.sensors.get(m) != sensors:
                 continue
             g = self.grid(m)
@@ -90,7 +95,8 @@ def build_regime(board: Board) -> Regime:
                   speeds=sorted(speed), image_speed_px_s=image_speed,
                   psnr={c: mean_finite(v) for c, v in psnr.items()},
                   bandwidth_khz={c: mean_finite(v) for c, v in bw.items()},
-                  methods=list(board.methods), sensors={m: board.info[m]["sensors"] for m in board.methods})
+                  methods=list(board.methods), sensors={m: board.info[m]["sensors"] for m in board.methods},
+                  ranked=board.ranked())
 
 
 def pareto_front(points: dict[str, tuple[float, float]]) -> set[str]:
@@ -103,10 +109,11 @@ def pareto_front(points: dict[str, tuple[float, float]]) -> set[str]:
     return front
 
 
-def cell_points(regime: Regime, lux: float, k: float) -> dict[str, tuple[float, float]]:
-    """(bandwidth kHz/px, PSNR dB) of every method with a finite result in the cell (lux, speed factor k)."""
+def cell_points(regime: Regime, lux: float, k: float, ranked_only: bool = True) -> dict[str, tuple[float, float]]:
+    """(bandwidth kHz/px, PSNR dB) of every ranked method (every method when not ``ranked_only``) with a finite
+    result in the cell (lux, speed factor k)."""
     out = {}
-    for m in regime.methods:
+    for m in (regime.ranked if ranked_only else regime.methods):
         b, q = regime.bandwidth_khz.get((m, lux, k), math.nan), regime.psnr.get((m, lux, k), math.nan)
         if math.isfinite(q) and math.isfinite(b) and b > 0:
             out[m] = (b, q)
@@ -124,14 +131,14 @@ def single_speed_note(regime: Regime) -> str | None:
 def regime_cells(board: Board, regime: Regime):
     """The regime table: methods × (lux, speed) PSNR (dB), then best S+E − best F+E per cell.
 
-    Cells are (text, is_best), best = highest PSNR per column.
+    Cells are (text, is_best), best = highest PSNR per column among the ranked methods.
     """
     cols = [(lux, k) for k in regime.speeds for lux in regime.luxes]
     header = ["Method"] + [f"{lux:g} lx, {regime.speed_label(k)}" for lux, k in cols]
     body = []
     best = []
     for lux, k in cols:
-        vals = {m: regime.psnr.get((m, lux, k), math.nan) for m in regime.methods}
+        vals = {m: regime.psnr.get((m, lux, k), math.nan) for m in regime.ranked}
         finite = [v for v in vals.values() if math.isfinite(v)]
         best.append({m for m, v in vals.items() if finite and v == max(finite)})
     for m in regime.methods:

@@ -1,5 +1,5 @@
 """The regime map's figures as PNG bytes: PSNR heatmaps over lux × image speed, the S+E − F+E difference with its
-0 dB contour, and PSNR against bandwidth per cell with the Pareto front.
+0 dB line drawn on cell edges (:func:`sign_boundary`), and PSNR against bandwidth per cell with the Pareto front.
 
 Rows are speed factors (labelled with the measured image speed in px/s), columns light levels in lux. Every
 number drawn is also in ``leaderboard_regime.csv`` and the markdown table.
@@ -46,7 +46,9 @@ def plot_regime_heatmaps(board: Board, regime: Regime) -> bytes:
     fig, axes = plt.subplots(nrows, ncols, figsize=(3.4 * ncols, h * nrows + 0.6), squeeze=False,
                              constrained_layout=True)
     grids = [regime.grid(m) for m in regime.methods]
-    finite = np.concatenate([g[np.isfinite(g)] for g in grids] + [np.empty(0)])
+    # the colour scale spans the ranked methods (a partial one's few cells, drawn clipped, cannot stretch it)
+    scaled = [g for m, g in zip(regime.methods, grids) if m in regime.ranked] or grids
+    finite = np.concatenate([g[np.isfinite(g)] for g in scaled] + [np.empty(0)])
     vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     im = None
     for ax, m, g in zip(axes.flat, regime.methods, grids):
@@ -62,6 +64,23 @@ def plot_regime_heatmaps(board: Board, regime: Regime) -> bytes:
     return figure_png(fig)
 
 
+def sign_boundary(diff: np.ndarray) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The 0 dB line of a cell grid [row, col] drawn on cell edges: the edge between two adjacent finite cells of
+    opposite sign (one > 0, the other < 0), as ((x0, y0), (x1, y1)) in image coordinates (cell centres at
+    integers). Cells are measurements, not samples of a smooth field: a line through their interiors (an
+    interpolated contour) would claim a crossing inside a cell that nothing measured."""
+    out = []
+    rows, cols = diff.shape
+    for i in range(rows):
+        for j in range(cols):
+            v = diff[i, j]
+            if j + 1 < cols and v * diff[i, j + 1] < 0:  # NaN compares False: no edge next to a missing cell
+                out.append(((j + 0.5, i - 0.5), (j + 0.5, i + 0.5)))
+            if i + 1 < rows and v * diff[i + 1, j] < 0:
+                out.append(((j - 0.5, i + 0.5), (j + 0.5, i + 0.5)))
+    return out
+
+
 def plot_spad_minus_frames(regime: Regime) -> bytes | None:
     """Best S+E − best F+E PSNR (dB) over lux × speed, with the 0 dB contour; None without both pairs."""
     diff = regime.spad_minus_frames()
@@ -75,12 +94,11 @@ def plot_spad_minus_frames(regime: Regime) -> bytes | None:
     _annotate(ax, diff, "+.1f")
     _axes_labels(ax, regime)
     title = f"best {SPAD_EVENTS} − best {FRAMES_EVENTS} (dB); red: {SPAD_EVENTS} wins"
-    if diff.shape[0] >= 2 and diff.shape[1] >= 2 and np.isfinite(diff).all() and diff.min() < 0 < diff.max():
-        ax.contour(np.arange(diff.shape[1]), np.arange(diff.shape[0]), diff, levels=[0.0], colors="k",
-                   linewidths=1.5)
-        title += "; black line: 0 dB"
-    elif diff.shape[0] < 2:
-        title += "; one speed: no contour"
+    segments = sign_boundary(diff)
+    for (x0, y0), (x1, y1) in segments:
+        ax.plot([x0, x1], [y0, y1], color="k", linewidth=1.8, solid_capstyle="projecting")
+    if segments:
+        title += "; black line: where the winner changes"
     ax.set_title(title, fontsize=8)
     fig.colorbar(im, ax=ax, label="PSNR difference (dB)")
     return figure_png(fig)
@@ -96,8 +114,8 @@ def plot_pareto_cells(board: Board, regime: Regime) -> bytes:
     for i, k in enumerate(regime.speeds):
         for j, lux in enumerate(regime.luxes):
             ax = axes[nr - 1 - i, j]  # fastest speed on top, as on the heatmaps
-            pts = cell_points(regime, lux, k)
-            front = pareto_front(pts)
+            pts = cell_points(regime, lux, k, ranked_only=False)  # partial methods drawn, never on the front
+            front = pareto_front(cell_points(regime, lux, k))
             for m, (b, q) in pts.items():
                 st = styles[m]
                 ax.plot([b], [q], st["marker"], color=st["color"], markersize=6,

@@ -1,18 +1,21 @@
 """The leaderboard's tables: cells of (text, is_best) for the renderers, and ``leaderboard.csv``.
 
-Best value per column is marked: highest PSNR, SSIM and MTF50, lowest bandwidth. Texts are unescaped; the HTML and
-markdown renderers escape them.
+Best value per column is marked among the methods scored on every recording of the board (:func:`best_ranked`):
+highest PSNR, SSIM and MTF, lowest bandwidth. :func:`budget_tables` ranks by PSNR at a bandwidth budget, per light
+level (the Pareto front of PSNR against bandwidth). Texts are unescaped; the HTML and markdown renderers escape
+them.
 """
 
 from __future__ import annotations
 
 import csv
+import math
+import re
 from pathlib import Path
 
 from simspad.evaluate.metrics import STAR_FREQS_CYC_PX
 from simspad.evaluate.leaderboard.board import (
     Board,
-    best_of,
     best_ranked,
     fmt_bandwidth,
     fmt_number,
@@ -21,6 +24,7 @@ from simspad.evaluate.leaderboard.board import (
     mean_finite,
     method_label,
 )
+from simspad.evaluate.leaderboard.regime import pareto_front
 
 
 def summary_cells(board: Board):
@@ -61,7 +65,8 @@ def table_cells(board: Board, lux: float | None = None):
 
     header = ["Method", "Sensors", "Bandwidth (kHz/px)", "Bits/px/s"] + \
         [s if lux is not None else f"{s} @ {l:g} lx" for s, l in columns] + ["Mean PSNR"]
-    best_cols = [best_of({m: board.psnr.get((m, s, l), float("nan")) for m in board.methods}) for s, l in columns]
+    best_cols = [best_ranked(board, {m: board.psnr.get((m, s, l), float("nan")) for m in board.methods})
+                 for s, l in columns]
     best_bw = best_ranked(board, {m: bandwidth(m, "khz") for m in board.methods}, higher=False)
     best_bits = best_ranked(board, {m: bandwidth(m, "bits") for m in board.methods}, higher=False)
     best_mean = best_ranked(board, {m: mean_psnr(m) for m in board.methods})
@@ -99,7 +104,7 @@ def star_tables(board: Board) -> list[tuple[str, tuple]]:
     for key, title in STAR_FIGURES:
         vals = {(m, s, l): board.star.get((m, s, l), {}).get(key, float("nan")) for m in board.methods
                 for s, l in cols}
-        best = [best_of({m: vals[(m, s, l)] for m in board.methods}) for s, l in cols]
+        best = [best_ranked(board, {m: vals[(m, s, l)] for m in board.methods}) for s, l in cols]
         header = ["Method"] + [f"{s} @ {l:g} lx" for s, l in cols]
         body = [[(method_label(board, m), False)] + [(fmt_number(vals[(m, s, l)], 3), m in best[j])
                                                      for j, (s, l) in enumerate(cols)] for m in board.methods]
@@ -114,6 +119,115 @@ STAR_FIGURES = tuple((f"mtf_at_{f:.2f}_cyc_px".replace(".", "p"), f"MTF at {f:g}
 PREAMBLE = ("PSNR in dB on display-mapped frames (white point: 99th percentile of the ground truth over the "
             "sequence; sRGB transfer curve). Best per column in bold, among the methods scored on every recording. "
             "Bandwidth: mean over recordings. Marks († and partial) are explained in the glossary at the end.")
+
+
+def _text(v, fmt: str = "{}") -> str:
+    """``v`` formatted with ``fmt``; – when absent or not finite; as plain text when ``fmt`` does not fit it (a
+    hand-edited results.json may hold a string where a number belongs: shown, escaped by the renderers)."""
+    if v is None or v == "" or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    try:
+        return fmt.format(v)
+    except (TypeError, ValueError):
+        return str(v)
+
+
+def about_cells(board: Board):
+    """What this board ranks: one row per results directory (kind, dataset, spec hash, seed, SimSPAD version,
+    creation time, evaluation rate); – where its ``results.json`` does not say."""
+    header = ["Results", "Kind", "Dataset", "Spec hash", "Seed", "SimSPAD", "Created (UTC)", "Evaluation rate (Hz)",
+              "Methods"]
+    body = [[(_text(a["directory"]), False), (_text(a["kind"]), False), (_text(a["dataset"]), False),
+             (_text(a["spec_hash"], "{:.12}"), False), (_text(a["seed"]), False), (_text(a["simspad_version"]), False),
+             (_text(a["created_utc"]), False), (_text(a["rate_hz"], "{:g}"), False),
+             (", ".join(a["methods"]) or "–", False)] for a in board.about]
+    return header, body
+
+
+def recording_cells(board: Board):
+    """Every recording of the board: scene, speed, lux, resolution, duration, seed and render settings (samples
+    per pixel, keyframe spacing); – where no ``results.json`` says."""
+    header = ["Recording", "Scene", "Speed", "Lux", "Resolution (px)", "Duration (ms)", "Seed", "Render spp",
+              "Keyframes ≤ px apart", "Keyframe rate ≥ (Hz)"]
+    rows = {r["recording"]: r for r in board.rows}
+    body = []
+    for rec in board.recordings:
+        i = board.recording_info.get(rec, {})
+        r = rows.get(rec, {})
+        k = i.get("speed_factor", r.get("speed_factor"))
+        size = f"{i['width']}×{i['height']}" if "width" in i and "height" in i else "–"
+        dur = i.get("duration_s")
+        body.append([(rec, False), (_text(i.get("scene", r.get("scene"))), False), (_text(k, "×{:g}"), False),
+                     (_text(i.get("lux", r.get("lux")), "{:g}"), False), (size, False),
+                     (_text(1e3 * dur if isinstance(dur, (int, float)) else None, "{:g}"), False),
+                     (_text(i.get("seed")), False), (_text(i.get("spp")), False),
+                     (_text(i.get("max_flow_px"), "{:g}"), False), (_text(i.get("min_rate_hz"), "{:g}"), False)])
+    return header, body
+
+
+ABOUT_NOTE = ("What this board ranks: the results directories merged (a later one overrides an earlier one's "
+              "method on the same recording) and every recording scored, with what the results say of it. A "
+              "recording's render settings are its samples per pixel and the keyframe spacing (at most that many "
+              "pixels of image motion between rendered keyframes, at least that rate); the ground truth is "
+              "interpolated between keyframes.")
+
+
+def ranking_rule(board: Board) -> str:
+    """The sentence stating how the summary ranks methods, with this board's recording count."""
+    n = len(board.recordings)
+    return (f"Rank: the methods scored on all {n} recordings of this board, by mean PSNR over those recordings "
+            "(highest first; equal means share the name order). Only they compete: every bold mark in every table "
+            "is the best among them, so a column, cell or mean is only ever compared over the same recordings. "
+            "A method scored on fewer recordings (partial k/N) is shown, after them, without a rank and never in "
+            "bold. The rank ignores bandwidth: the best PSNR within a bandwidth budget is in the section PSNR at a "
+            "bandwidth budget.")
+
+
+BANDWIDTH_NOTE = ("Bandwidth: what a method reads from its sensors per pixel and second, as readouts (kHz per "
+                  "pixel) and as bits (Bits/px/s), summed over the sensors it uses. A SPAD binary frame is one "
+                  "1-bit readout; an aggregate of n SPAD frames one readout of ceil(log2(n + 1)) bits; a "
+                  "conventional frame one readout of its bit depth (12 bits for the blackfly_s preset); an event "
+                  "one 32-bit readout. Reading every SPAD frame of the SwissSPAD2 preset is 97.7 kHz and 97 656 "
+                  "bits/px/s; aggregating 244 of them, 0.4 kHz and 3200 bits/px/s.")
+
+
+BUDGET_NOTE = ("Per light level, the methods no other ranked method beats on both PSNR and bandwidth (the Pareto "
+               "front), cheapest first: with a budget of at least the listed bandwidth, the method on that row is "
+               "the best PSNR affordable. PSNR is the mean over the scenes at that level (as in the table per "
+               "light level), bandwidth the mean over its recordings, kHz of readouts per pixel. Only methods "
+               "scored on every recording take part. The figure PSNR at a bandwidth budget (under Plots) draws "
+               "the same fronts.")
+
+
+def budget_fronts(board: Board) -> dict[float, list[tuple[str, float, float, float]]]:
+    """Per lux level, the Pareto front of PSNR against bandwidth among the ranked methods, cheapest first:
+    ``[(method, bandwidth kHz/px, bits/px/s, PSNR dB), ...]``; PSNR increases along it."""
+    means = lux_means(board)
+    out = {}
+    for lux in lux_levels(board):
+        pts, bits = {}, {}
+        for m in board.ranked():
+            i = board.info[m]
+            b, q = mean_finite(i["bw_khz_by_lux"].get(lux, [])), means[m][lux]
+            if math.isfinite(b) and math.isfinite(q) and b > 0:
+                pts[m], bits[m] = (b, q), mean_finite(i["bw_bits_by_lux"].get(lux, []))
+        front = pareto_front(pts)
+        out[lux] = sorted(((m, pts[m][0], bits[m], pts[m][1]) for m in front), key=lambda x: (x[1], -x[3], x[0]))
+    return out
+
+
+def budget_tables(board: Board) -> list[tuple[float, tuple]]:
+    """(lux, (header, body)) of the PSNR-at-a-bandwidth-budget table of each light level; [] when no ranked
+    method has both figures. Cells are (text, is_best) with is_best False (each row is the best at its budget)."""
+    header = ["Budget ≥ (kHz/px)", "Best method within budget", "Sensors", "Bits/px/s", "PSNR (dB)"]
+    out = []
+    for lux, front in budget_fronts(board).items():
+        if not front:
+            continue
+        body = [[(fmt_bandwidth(b), False), (method_label(board, m), False), (board.info[m]["sensors"], False),
+                 (fmt_bandwidth(bits), False), (fmt_number(q), False)] for m, b, bits, q in front]
+        out.append((lux, (header, body)))
+    return out
 
 REGIME_NOTE = ("PSNR (dB, mean over scenes) per light level and image speed. Speed rows are the dataset's speed "
                "factors, labelled with the median image speed measured in their recordings (px/s). The last row "
@@ -136,9 +250,18 @@ def csv_safe(value):
     return value
 
 
+def csv_column(scene_column: str, lux: float) -> str:
+    """The ASCII ``leaderboard.csv`` header of a (scene column, lux) PSNR column: ``psnr_db_fan_x16_100lx``.
+
+    Spaces and other non-identifier characters become ``_``, ``×k`` becomes ``xk``, so the header is one token that
+    any CSV reader, spreadsheet or dataframe library takes as written."""
+    name = re.sub(r"[^A-Za-z0-9.]+", "_", scene_column.replace("×", "x")).strip("_")
+    return f"psnr_db_{name}_{lux:g}lx"
+
+
 def write_csv_table(path: Path, board: Board) -> None:
     cols = ["method", "label", "sensors", "absolute_scale", "bandwidth_khz_per_pixel",
-            "bandwidth_bits_per_pixel_s"] + [f"psnr_db[{s}@{l:g}lx]" for s, l in board.columns] + \
+            "bandwidth_bits_per_pixel_s"] + [csv_column(s, l) for s, l in board.columns] + \
         ["mean_psnr_db", "mean_ssim", "errors"]
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
