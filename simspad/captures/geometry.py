@@ -1,0 +1,94 @@
+"""Putting each sensor on the reference grid: homographies applied to events, binary frames and images.
+
+A sensor's homography ``Hs`` (3×3) maps its pixel coordinates to the reference grid's:
+``(u, v, w)ᵀ = Hs·(x, y, 1)ᵀ``, reference pixel ``(u/w, v/w)``; pixel (x, y) is the centre of column x, row y.
+
+- **Events** are moved forward: each event's coordinates are mapped and rounded to the nearest reference pixel
+  (``numpy.rint``: half to even); events landing outside the grid or outside the valid region are dropped.
+  Several sensor pixels can land on one reference pixel (a sensor finer than the grid) and some reference pixels
+  receive none (a coarser one): the event methods see the stream as if the sensor had the grid's pixels.
+- **Binary SPAD frames** are resampled backwards, nearest neighbour: reference pixel (u, v) takes the bit of the
+  sensor pixel nearest to ``Hs⁻¹·(u, v, 1)`` (a bit stays a bit; interpolating would invent probabilities).
+- **Conventional frames** are resampled backwards bilinearly (scipy's ``map_coordinates``, order 1), DN rounded
+  to the nearest integer.
+
+The valid region is where every sensor sees the reference pixel (its back-mapped centre lies inside the sensor,
+within half a pixel of the outermost centres), intersected with an optional mask image. Pixels outside it hold
+0 in SPAD bits and frames, and no events.
+
+Coordinates are computed with element-wise products and sums, not matrix products, so the same calibration gives
+the same mapping on every CPU (docs/internals.md, Determinism).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+
+def apply_homography(h: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Map coordinates ``(x, y)`` (float64 arrays) by the homography ``h``; returns ``(u, v)``."""
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    w = h[2, 0] * x + h[2, 1] * y + h[2, 2]
+    return (h[0, 0] * x + h[0, 1] * y + h[0, 2]) / w, (h[1, 0] * x + h[1, 1] * y + h[1, 2]) / w
+
+
+def is_identity(h: np.ndarray | None) -> bool:
+    return h is None or bool(np.array_equal(h, np.eye(3)))
+
+
+class SensorWarp:
+    """The mapping of one sensor of ``sensor_shape`` (H, W) onto the reference grid ``ref_shape`` (H, W).
+
+    Attributes
+    ----------
+    identity : bool
+        The sensor is the reference grid (no resampling: data pass through unchanged).
+    sees : ndarray [H_ref, W_ref] bool
+        Reference pixels whose back-mapped centre lies on the sensor.
+    """
+
+    def __init__(self, homography: np.ndarray | None, sensor_shape: tuple[int, int], ref_shape: tuple[int, int]):
+        self.h = np.eye(3) if homography is None else np.asarray(homography, np.float64)
+        self.sensor_shape = tuple(sensor_shape)
+        self.ref_shape = tuple(ref_shape)
+        self.identity = is_identity(homography) and self.sensor_shape == self.ref_shape
+        Hr, Wr = self.ref_shape
+        Hs, Ws = self.sensor_shape
+        v, u = np.mgrid[0:Hr, 0:Wr]
+        sx, sy = apply_homography(np.linalg.inv(self.h), u.ravel(), v.ravel())
+        self.src_x = sx.reshape(Hr, Wr)
+        self.src_y = sy.reshape(Hr, Wr)
+        self.sees = ((self.src_x >= -0.5) & (self.src_x <= Ws - 0.5) & (self.src_y >= -0.5)
+                     & (self.src_y <= Hs - 0.5))
+        self._nx = np.clip(np.rint(self.src_x), 0, Ws - 1).astype(np.int64)
+        self._ny = np.clip(np.rint(self.src_y), 0, Hs - 1).astype(np.int64)
+
+    def nearest(self, img: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """Resample ``img`` ([..., H_s, W_s]) to the grid by nearest neighbour; 0 outside ``valid``."""
+        if self.identity:
+            return np.where(valid, img, 0).astype(img.dtype, copy=False)
+        out = img[..., self._ny, self._nx]
+        return np.where(valid, out, 0).astype(img.dtype, copy=False)
+
+    def bilinear(self, img: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """Resample one image [H_s, W_s] to the grid bilinearly; 0 outside ``valid``."""
+        if self.identity:
+            return np.where(valid, img, 0).astype(img.dtype, copy=False)
+        out = map_coordinates(np.asarray(img, np.float64), [self.src_y, self.src_x], order=1, mode="nearest")
+        return np.where(valid, out, 0.0)
+
+    def events(self, x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Reference-grid ``(x, y)`` of events at sensor pixels ``(x, y)`` and the mask of those kept."""
+        if self.identity:
+            keep = valid[y, x]
+            return x, y, keep
+        u, v = apply_homography(self.h, x, y)
+        ui, vi = np.rint(u), np.rint(v)
+        Hr, Wr = self.ref_shape
+        inside = (ui >= 0) & (ui < Wr) & (vi >= 0) & (vi < Hr)
+        ui = np.where(inside, ui, 0).astype(np.int64)
+        vi = np.where(inside, vi, 0).astype(np.int64)
+        keep = inside & valid[vi, ui]
+        return ui, vi, keep
