@@ -14,7 +14,8 @@ Steps, each sensor streamed in chunks (memory flat in the capture's length):
    optional mask image.
 4. **Dark counts**: ``dcr_cps`` (uniform), ``dcr_map`` (a ``.npy``, or an ``.npz``'s ``dcr_cps``, on the SPAD's
    pixels) or ``dark_capture`` (a capture with the lens capped, same format and options as the SPAD's: the ML rate
-   ``−ln(1 − k/n)/gate_s`` of k ones in n gates, k = n counted as n − ½); else the ``dcr_cps`` an ``.npz`` carries.
+   ``−ln(1 − k/n)/gate_s`` of k ones in n gates, k = n counted as n − ½; its format from its suffix, its
+   packing options the SPAD's); else the ``dcr_cps`` an ``.npz`` carries.
 5. The recording is written through :class:`~simspad.io.recording.RecordingWriter` (a temporary sibling, renamed
    when complete); it has no ``/gt``: ``simspad evaluate`` scores it without ground truth.
 """
@@ -35,7 +36,7 @@ from simspad.captures.geometry import SensorWarp
 from simspad.errors import InputError
 from simspad.io.captures import events as event_files
 from simspad.io.captures import spad as spad_files
-from simspad.io.captures.calibration import Calibration, SensorCalibration, load_calibration
+from simspad.io.captures.calibration import SPAD_FORMATS, Calibration, SensorCalibration, load_calibration
 from simspad.io.captures.frames import FrameStack, read_timestamps
 from simspad.io.compression import SPAD_COMPRESSIONS
 from simspad.io.provenance import created_utc
@@ -100,7 +101,8 @@ class _Spad:
         if o["dcr_map"] is not None:
             return _read_map(o["dcr_map"], self.shape)
         if o["dark_capture"] is not None:
-            dark = spad_files.open_cube(self.cal.format, o["dark_capture"], width=self.cube.width,
+            dark_fmt = SPAD_FORMATS.get(o["dark_capture"].suffix.lower(), self.cal.format)
+            dark = spad_files.open_cube(dark_fmt, o["dark_capture"], width=self.cube.width,
                                         height=self.cube.height, bit_order=o["bit_order"],
                                         bitpack_dim=o["bitpack_dim"], frame_header_bytes=o["frame_header_bytes"])
             counts = np.zeros(self.shape, np.int64)
@@ -165,7 +167,7 @@ class _Events:
         self.cal = cal
         size = event_files.SIZES[cal.format](cal.path)
         w, h = cal.width or (size[0] if size else None), cal.height or (size[1] if size else None)
-        if size and cal.width and cal.height and (cal.width, cal.height) != tuple(size):
+        if size and ((cal.width and cal.width != size[0]) or (cal.height and cal.height != size[1])):
             raise InputError(f"the file states {size[0]} × {size[1]} pixels, the calibration {cal.width} × "
                              f"{cal.height}", path=cal.path, field="events.width")
         if w is None or h is None:
