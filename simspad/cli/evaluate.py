@@ -23,7 +23,8 @@ def summary_table(rows: list[dict]) -> str:
         elif r["psnr_db"] != r["psnr_db"] and r.get("white_point_ph_s_m2") != r.get("white_point_ph_s_m2"):
             # no ground truth (a real capture): the scores do not exist, they are not zero
             lines.append(f"{r['method'][:20]:<20} {key:<28} {'n/a':>8} {'n/a':>6} {r['bandwidth_khz_per_pixel']:9.3f}"
-                         f"  (no ground truth; MTF@0.25 {r['mtf_at_0p25_cyc_px']:.3f})")
+                         f"  (no ground truth; MTF {r['mtf_at_0p25_cyc_px']:.3f} at 0.25, "
+                         f"{r['mtf_at_0p40_cyc_px']:.3f} at 0.40 cyc/px)")
         else:
             lines.append(f"{r['method'][:20]:<20} {key:<28} {r['psnr_db']:8.2f} {r['ssim']:6.3f} "
                          f"{r['bandwidth_khz_per_pixel']:9.3f}")

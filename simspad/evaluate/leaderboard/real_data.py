@@ -1,8 +1,9 @@
 """The leaderboard's real-data section: recordings without ground truth (``simspad import``), one table each.
 
 A results directory's ``results.json`` marks each recording with ``ground_truth`` (false for real captures). For
-each such recording the methods are listed by their Siemens-star MTF at 0.25 cycles/px (highest first; methods
-without a value after them, in the board's order), with the MTF at 0.40 cycles/px, MTF50 and the bandwidth. PSNR
+each such recording the methods are listed by their Siemens-star MTF at 0.25 cycles/px, or at 0.40 where the
+star cannot measure 0.25 at the recording's resolution (highest first; methods without a value after them, in the
+board's order), with the MTF at 0.40 cycles/px, MTF50 and the bandwidth. PSNR
 and SSIM do not exist without ground truth and are not shown; the MTF is relative to a perfect print of the star
 (:mod:`simspad.evaluate.real_data`). Without a declared star region the MTF cells are "–".
 """
@@ -38,6 +39,10 @@ def real_recordings(results_dirs) -> set[str]:
     return out
 
 
+def _finite(v) -> bool:
+    return isinstance(v, float) and math.isfinite(v)
+
+
 def _cell(v, digits: int) -> str:
     return f"{v:.{digits}f}" if isinstance(v, float) and math.isfinite(v) else "–"
 
@@ -51,9 +56,14 @@ def real_data_tables(board: Board, real: set[str]) -> list[tuple[str, list[str],
             continue
         order = {m: i for i, m in enumerate(board.methods)}
 
+        # ranked by the lowest star frequency any method could be measured at (0.25, else 0.40 cycles/px)
+        rank_col = next((c for c in ("mtf_at_0p25_cyc_px", "mtf_at_0p40_cyc_px")
+                         if any(_finite(r.get(c)) and not r.get("error") for r in rows.values())),
+                        "mtf_at_0p25_cyc_px")
+
         def key(m):
-            v = rows[m].get("mtf_at_0p25_cyc_px", float("nan")) if not rows[m].get("error") else float("nan")
-            ok = isinstance(v, float) and math.isfinite(v)
+            v = rows[m].get(rank_col, float("nan")) if not rows[m].get("error") else float("nan")
+            ok = _finite(v)
             return (0 if ok else 1, -v if ok else 0.0, order.get(m, len(order)))
 
         methods = sorted(rows, key=key)
