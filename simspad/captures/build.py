@@ -12,11 +12,14 @@ Steps, each sensor streamed in chunks (memory flat in the capture's length):
 3. **Geometry** (:mod:`simspad.captures.geometry`): each sensor is mapped onto the reference grid by its
    homography; the valid region (``/calibration/valid_mask``) is where every sensor sees the grid, within an
    optional mask image.
-4. **Dark counts**: ``dcr_cps`` (uniform), ``dcr_map`` (a ``.npy``, or an ``.npz``'s ``dcr_cps``, on the SPAD's
+4. **Frame response**: from the calibration, or (``[frames.emva]``) measured from an EMVA 1288 capture set by
+   :func:`simspad.analysis.emva.photon_transfer` (gain, temporal dark noise, saturation capacity; black level =
+   the dark stack's mean), the calibration's own values winning.
+5. **Dark counts**: ``dcr_cps`` (uniform), ``dcr_map`` (a ``.npy``, or an ``.npz``'s ``dcr_cps``, on the SPAD's
    pixels) or ``dark_capture`` (a capture with the lens capped, same format and options as the SPAD's: the ML rate
    ``−ln(1 − k/n)/gate_s`` of k ones in n gates, k = n counted as n − ½; its format from its suffix, its
    packing options the SPAD's); else the ``dcr_cps`` an ``.npz`` carries.
-5. The recording is written through :class:`~simspad.io.recording.RecordingWriter` (a temporary sibling, renamed
+6. The recording is written through :class:`~simspad.io.recording.RecordingWriter` (a temporary sibling, renamed
    when complete); it has no ``/gt``: ``simspad evaluate`` scores it without ground truth.
 """
 
@@ -32,6 +35,7 @@ import numpy as np
 from tqdm import tqdm
 
 from simspad import __version__
+from simspad.analysis.emva import photon_transfer
 from simspad.captures.geometry import SensorWarp
 from simspad.errors import InputError
 from simspad.io.captures import events as event_files
@@ -138,8 +142,36 @@ def _read_map(path: Path, shape) -> np.ndarray:
     return m
 
 
+def _emva_response(cal: SensorCalibration) -> dict:
+    """Gain, read noise, full well and black level measured from the calibration's EMVA 1288 capture set (flat
+    fields at increasing illumination and a dark stack): :func:`simspad.analysis.emva.photon_transfer`; the black
+    level is the dark stack's mean. Only the fields the calibration does not give are returned."""
+    emva = cal.options["emva"]
+
+    def stack(path: Path) -> np.ndarray:
+        fmt = "png" if path.is_dir() else "tiff"
+        frames = np.stack(list(FrameStack(fmt, path).frames())).astype(np.float64)
+        if frames.shape[0] < 2:
+            raise InputError("an EMVA 1288 stack needs at least 2 frames", path=path, field="frames.emva")
+        return frames
+
+    dark = stack(emva["dark"])
+    try:
+        pt = photon_transfer([stack(p) for p in emva["flats"]], dark)
+    except ValueError as exc:  # too few levels in the linear range, …: the capture set, not a bug
+        raise InputError(f"EMVA 1288 analysis failed: {exc}", path=cal.path, field="frames.emva.flats") from None
+    measured = {"gain_dn_per_e": pt.gain_dn_per_e, "read_noise_e": pt.read_noise_e, "full_well_e": pt.saturation_e,
+                "black_level_dn": float(dark.mean()), "dsnu_e": pt.dsnu_e, "prnu": pt.prnu}
+    if not (np.isfinite(pt.gain_dn_per_e) and pt.gain_dn_per_e > 0):
+        raise InputError(f"EMVA 1288 analysis gave a gain of {pt.gain_dn_per_e} DN/e- (flat fields not brighter "
+                         "than the dark stack?)", path=cal.path, field="frames.emva.flats")
+    return {k: v for k, v in measured.items() if k not in cal.attrs}
+
+
 class _Frames:
     def __init__(self, cal: SensorCalibration):
+        if cal.options.get("emva") is not None:
+            cal = replace(cal, attrs={**cal.attrs, **_emva_response(cal)})
         self.cal = cal
         self.stack = FrameStack(cal.format, cal.path)
         H, W = self.stack.shape

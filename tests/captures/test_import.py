@@ -334,3 +334,48 @@ def test_truncated_bin_and_events_outside_the_sensor_are_refused_by_the_cli(expo
     r = simspad_cli.run("import", cal, "--out", tmp_path / "imp.h5")
     assert r.returncode == 2 and "ev.npy" in r.stderr and "events.x" in r.stderr and "event 2" in r.stderr
     assert not (tmp_path / "imp.h5").exists()
+
+
+def test_emva_capture_set_measures_the_frame_response(exported, tmp_path):
+    """Flat fields at 12 levels up to saturation and a dark stack (K = 0.39 DN/e⁻, σ_d = 2.8 e⁻, 10 500 e⁻ full
+    well, black 40 DN, 12 bit) stand in for the gain, noise, full well and black level of the calibration; a
+    value the calibration gives wins over the measured one."""
+    import tifffile
+
+    rng = np.random.default_rng(11)
+    K, sigma_d, full, black = 0.39, 2.8, 10_500.0, 40.0
+
+    def stack(mean_e, n=4):
+        e = np.minimum(rng.poisson(mean_e, (n, 48, 48)) + rng.normal(0, sigma_d, (n, 48, 48)), full)
+        return np.clip(np.rint(K * e + black), 0, 4095).astype(np.uint16)
+
+    def write(path, frames):
+        with tifffile.TiffWriter(path) as tw:
+            for f in frames:
+                tw.write(f, contiguous=True)
+
+    (tmp_path / "emva").mkdir()
+    flats = []
+    for i, mean_e in enumerate(np.linspace(200, 13_000, 12)):
+        write(tmp_path / "emva" / f"flat{i:02d}.tif", stack(mean_e))
+        flats.append(f"emva/flat{i:02d}.tif")
+    write(tmp_path / "emva" / "dark.tif", stack(0.0, 16))
+    shutil.copytree(exported / "npz", tmp_path / "npz")
+    cal = _calibration(tmp_path, events=None, spad=None)
+    text = cal.read_text()
+    for key in ("gain_dn_per_e", "read_noise_e", "full_well_e", "black_level_dn"):
+        text = "\n".join(line for line in text.splitlines() if not line.startswith(key + " ")) + "\n"
+    text += f"[frames.emva]\nflats = {json.dumps(flats)}\ndark = \"emva/dark.tif\"\n"
+    cal.write_text(text)
+    import_captures(cal, tmp_path / "imp.h5", progress=False)
+    with open_recording(tmp_path / "imp.h5") as rec:
+        a = rec.frames.attrs
+    assert a["gain_dn_per_e"] == pytest.approx(K, rel=0.03)
+    assert a["read_noise_e"] == pytest.approx(sigma_d, rel=0.1)
+    assert a["full_well_e"] == pytest.approx(full, rel=0.1)
+    assert a["black_level_dn"] == pytest.approx(black, abs=0.5)
+    cal.write_text(text.replace("[frames]\n", "[frames]\nread_noise_e = 3.5\n"))
+    import_captures(cal, tmp_path / "imp2.h5", progress=False)
+    with open_recording(tmp_path / "imp2.h5") as rec:
+        assert rec.frames.attrs["read_noise_e"] == 3.5
+        assert rec.frames.attrs["gain_dn_per_e"] == pytest.approx(K, rel=0.03)

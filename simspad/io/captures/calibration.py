@@ -255,15 +255,42 @@ def _spad(t: _Table) -> SensorCalibration:
     return SensorCalibration("spad", path, fmt, width, height, offset, hom, attrs, opts)
 
 
+#: Frame response fields an EMVA 1288 flat/dark capture set measures (given values win over measured ones).
+EMVA_MEASURED = ("gain_dn_per_e", "read_noise_e", "full_well_e", "black_level_dn")
+
+
+def _emva(t: _Table) -> dict | None:
+    if not t.has("emva"):
+        return None
+    e = _Table(t.path, "frames.emva", t.get("emva"))
+    flats = e.get("flats")
+    if not isinstance(flats, list) or len(flats) < 3 or not all(isinstance(f, str) for f in flats):
+        raise e.error("flats", "expected a list of at least 3 flat-field captures (TIFF stacks or image folders), "
+                               "at increasing illumination up to saturation")
+    resolved = []
+    for i, f in enumerate(flats):
+        p = Path(f).expanduser()
+        p = p if p.is_absolute() else t.path.parent / p
+        if not (p.is_file() or p.is_dir()):
+            raise e.error(f"flats[{i}]", f"no such file or folder: {p}")
+        resolved.append(p)
+    out = {"flats": resolved, "dark": e.file("dark", required=True, directory_ok=True)}
+    e.finish()
+    return out
+
+
 def _frames(t: _Table) -> SensorCalibration:
     path, fmt, width, height, offset, hom = _sensor_common(t, "frames", FRAME_FORMATS)
-    attrs = _params(t, _FRAME_PARAMS, _REQUIRED["frames"])
+    emva = _emva(t)
+    required = _REQUIRED["frames"] if emva is None else tuple(k for k in _REQUIRED["frames"]
+                                                               if k not in EMVA_MEASURED)
+    attrs = _params(t, _FRAME_PARAMS, required)
     bit_depth = t.integer("bit_depth", required=True)
     if bit_depth > 16:
         raise t.error("bit_depth", f"at most 16 bits (frames are stored as uint16), got {bit_depth}")
     attrs["bit_depth"] = bit_depth
     attrs.setdefault("fill_factor", 1.0)
-    opts = {"timestamps": t.file("timestamps"),
+    opts = {"emva": emva, "timestamps": t.file("timestamps"),
             "frame_rate_hz": t.number("frame_rate_hz", positive=True, unit="Hz"),
             "exposure_s": t.number("exposure_s", positive=True, unit="s"),
             "t_start_s": t.number("t_start_s", 0.0, unit="s")}
