@@ -16,14 +16,16 @@ The valid region is where every sensor sees the reference pixel (its back-mapped
 within half a pixel of the outermost centres), intersected with an optional mask image. Pixels outside it hold
 0 in SPAD bits and frames, and no events.
 
-Coordinates are computed with element-wise products and sums, not matrix products, so the same calibration gives
-the same mapping on every CPU (docs/internals.md, Determinism).
+Coordinates are computed with element-wise products and sums, and the inverse by the adjugate, not BLAS or
+LAPACK, so the same calibration gives the same mapping on every CPU (docs/internals.md, Determinism).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.ndimage import map_coordinates
+
+from simspad.io.captures.calibration import inverse3
 
 
 def apply_homography(h: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +59,7 @@ class SensorWarp:
         Hr, Wr = self.ref_shape
         Hs, Ws = self.sensor_shape
         v, u = np.mgrid[0:Hr, 0:Wr]
-        sx, sy = apply_homography(np.linalg.inv(self.h), u.ravel(), v.ravel())
+        sx, sy = apply_homography(inverse3(self.h), u.ravel(), v.ravel())
         self.src_x = sx.reshape(Hr, Wr)
         self.src_y = sy.reshape(Hr, Wr)
         self.sees = ((self.src_x >= -0.5) & (self.src_x <= Ws - 0.5) & (self.src_y >= -0.5)

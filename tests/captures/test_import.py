@@ -379,3 +379,48 @@ def test_emva_capture_set_measures_the_frame_response(exported, tmp_path):
     with open_recording(tmp_path / "imp2.h5") as rec:
         assert rec.frames.attrs["read_noise_e"] == 3.5
         assert rec.frames.attrs["gain_dn_per_e"] == pytest.approx(K, rel=0.03)
+
+
+def test_a_pose_gives_the_plane_induced_homography(exported, tmp_path):
+    """K, R, t and a plane at distance d: H = K_ref (R + t nᵀ/d) K⁻¹. A sideways baseline of 2 cm to a plane 1 m
+    away at f = 100 px shifts the image by 2 px (the event stream lands as under that shift's homography); a
+    rotation alone gives K R K⁻¹, whatever the distance."""
+    from simspad.io.captures.calibration import pose_homography
+
+    K = [[100.0, 0.0, 8.0], [0.0, 100.0, 6.0], [0.0, 0.0, 1.0]]
+    shutil.copytree(exported / "npz", tmp_path / "npz")
+    shutil.copy(exported / "events.raw", tmp_path / "events.raw")
+    cal = _calibration(tmp_path, spad=None, frames=None,
+                       extra_events={"intrinsics": K, "rotation": np.eye(3).tolist(), "translation_m": [0.02, 0, 0],
+                                     "plane_distance_m": 1.0})
+    cal.write_text(cal.read_text() + _table("reference", {"width": W, "height": H, "intrinsics": K}))
+    import_captures(cal, tmp_path / "pose.h5", progress=False)
+    shifted = _calibration(tmp_path, spad=None, frames=None,
+                           extra_events={"homography": [[1, 0, 2], [0, 1, 0], [0, 0, 1]]})
+    import_captures(shifted, tmp_path / "hom.h5", progress=False)
+    _assert_same(tmp_path / "hom.h5", tmp_path / "pose.h5", ("events/t", "events/x", "events/y", "events/p"))
+    with open_recording(tmp_path / "pose.h5") as rec:
+        np.testing.assert_allclose(rec.h5["calibration/homography_events"][()], [[1, 0, 2], [0, 1, 0], [0, 0, 1]],
+                                   atol=1e-12)
+    c, s_ = np.cos(0.1), np.sin(0.1)
+    R = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    Km = np.array(K)
+    expected = Km @ R @ np.linalg.inv(Km)
+    np.testing.assert_allclose(pose_homography(Km, R, np.zeros(3), 5.0, Km), expected / expected[2, 2], atol=1e-12)
+
+
+def test_a_pose_without_reference_intrinsics_or_with_a_homography_is_refused(exported, tmp_path):
+    shutil.copytree(exported / "npz", tmp_path / "npz")
+    shutil.copy(exported / "events.raw", tmp_path / "events.raw")
+    pose = {"intrinsics": np.eye(3).tolist(), "rotation": np.eye(3).tolist(), "translation_m": [0, 0, 0],
+            "plane_distance_m": 1.0}
+    cal = _calibration(tmp_path, spad=None, frames=None, extra_events=pose)
+    with pytest.raises(InputError, match="reference.intrinsics"):
+        import_captures(cal, tmp_path / "a.h5", progress=False)
+    cal = _calibration(tmp_path, spad=None, frames=None, extra_events={**pose, "homography": np.eye(3).tolist()})
+    with pytest.raises(InputError, match="events.intrinsics: give either a homography or a pose"):
+        import_captures(cal, tmp_path / "a.h5", progress=False)
+    bad = {**pose, "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 2]]}
+    cal = _calibration(tmp_path, spad=None, frames=None, extra_events=bad)
+    with pytest.raises(InputError, match="events.rotation: not a rotation"):
+        import_captures(cal, tmp_path / "a.h5", progress=False)

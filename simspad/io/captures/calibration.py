@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -162,7 +162,7 @@ class _Table:
             raise self.error(key, f"no such {'file or folder' if directory_ok else 'file'}: {p}")
         return p
 
-    def matrix3(self, key: str) -> np.ndarray | None:
+    def matrix3(self, key: str, *, what: str = "homography", normalise: bool = True) -> np.ndarray | None:
         v = self.get(key)
         if v is None:
             return None
@@ -171,10 +171,22 @@ class _Table:
         except (TypeError, ValueError):
             m = None
         if m is None or m.shape != (3, 3) or not np.all(np.isfinite(m)):
-            raise self.error(key, "expected a 3×3 array of finite numbers (rows of the homography)")
+            raise self.error(key, f"expected a 3×3 array of finite numbers (rows of the {what})")
         if abs(np.linalg.det(m)) < 1e-12:
-            raise self.error(key, "the homography is singular (determinant 0)")
-        return m / m[2, 2] if m[2, 2] != 0 else m
+            raise self.error(key, f"the {what} is singular (determinant 0)")
+        return m / m[2, 2] if normalise and m[2, 2] != 0 else m
+
+    def vector3(self, key: str) -> np.ndarray | None:
+        v = self.get(key)
+        if v is None:
+            return None
+        try:
+            a = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = None
+        if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise self.error(key, "expected [x, y, z] in metres")
+        return a
 
     def finish(self) -> None:
         unknown = sorted(set(self.raw) - self.used)
@@ -227,17 +239,74 @@ def _sensor_common(t: _Table, kind: str, formats: dict[str, str]):
     width = t.integer("width")
     height = t.integer("height")
     offset = t.number("time_offset_s", 0.0, unit="s")
-    return path, fmt, width, height, offset, t.matrix3("homography")
+    return path, fmt, width, height, offset, t.matrix3("homography"), _pose(t)
 
+
+#: The fields of a sensor's pose relative to the reference camera (the alternative to a homography).
+POSE_FIELDS = ("intrinsics", "rotation", "translation_m", "plane_distance_m")
+
+
+def _pose(t: _Table) -> dict | None:
+    """The sensor's intrinsics K, rotation R and translation t onto the reference camera and the distance of the
+    scene plane, when given (all four; the reference's intrinsics come from ``[reference]``)."""
+    given = [k for k in POSE_FIELDS if t.has(k)]
+    if not given:
+        return None
+    if t.has("homography"):
+        raise t.error(given[0], "give either a homography or a pose (intrinsics, rotation, translation_m, "
+                                "plane_distance_m), not both")
+    missing = [k for k in POSE_FIELDS if k not in given]
+    if missing:
+        raise t.error(missing[0], f"a pose needs all of {', '.join(POSE_FIELDS)}")
+    rot = t.matrix3("rotation", what="rotation", normalise=False)
+    if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise t.error("rotation", "not a rotation matrix (R·Rᵀ must be the identity, det R = +1)")
+    return {"K": t.matrix3("intrinsics", what="intrinsic matrix", normalise=False), "R": rot,
+            "t": t.vector3("translation_m"),
+            "d": t.number("plane_distance_m", positive=True, required=True, unit="m")}
+
+
+def pose_homography(k_sensor: np.ndarray, rotation: np.ndarray, translation_m: np.ndarray, plane_distance_m: float,
+                    k_reference: np.ndarray) -> np.ndarray:
+    """The homography from the sensor's pixels to the reference camera's induced by a scene plane.
+
+    A point X in the sensor camera's frame is ``R·X + t`` in the reference camera's; on the plane ``nᵀX = d`` with
+    n = (0, 0, 1) (facing the sensor, at distance d along its optical axis) that is ``(R + t·nᵀ/d)·X``, so pixels
+    map by ``H = K_ref·(R + t·nᵀ/d)·K_sensor⁻¹`` (Hartley & Zisserman, eq. 13.2), normalised to H[2, 2] = 1.
+    """
+    plane = np.zeros((3, 3))
+    plane[:, 2] = np.asarray(translation_m, np.float64) / plane_distance_m  # t·nᵀ/d with n = (0, 0, 1)
+    h = matmul3(matmul3(k_reference, rotation + plane), inverse3(k_sensor))
+    return h / h[2, 2]
+
+
+def matmul3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a·b`` of 3×3 matrices as element-wise products summed in a fixed order: the same bits on every CPU
+    (a BLAS product's rounding depends on the kernel the CPU selects; docs/internals.md, Determinism)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a[:, 0, None] * b[0] + a[:, 1, None] * b[1] + a[:, 2, None] * b[2]
+
+
+def inverse3(m: np.ndarray) -> np.ndarray:
+    """Inverse of a 3×3 matrix by its adjugate (no LAPACK, for the same reason as :func:`matmul3`)."""
+    m = np.asarray(m, np.float64)
+    cof = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            r = [k for k in range(3) if k != i]
+            c = [k for k in range(3) if k != j]
+            cof[i, j] = (-1) ** (i + j) * (m[r[0], c[0]] * m[r[1], c[1]] - m[r[0], c[1]] * m[r[1], c[0]])
+    det = m[0, 0] * cof[0, 0] + m[0, 1] * cof[0, 1] + m[0, 2] * cof[0, 2]
+    return cof.T / det
 
 def _spad(t: _Table) -> SensorCalibration:
-    path, fmt, width, height, offset, hom = _sensor_common(t, "spad", SPAD_FORMATS)
+    path, fmt, width, height, offset, hom, pose = _sensor_common(t, "spad", SPAD_FORMATS)
     attrs = _params(t, _SPAD_PARAMS, _REQUIRED["spad"])
     bin_s = t.number("bin_s", required=fmt != "npz", positive=True, unit="s")
     gate_s = t.number("gate_s", positive=True, unit="s")
     if bin_s is not None and gate_s is not None and gate_s > bin_s * (1 + 1e-9):
         raise t.error("gate_s", f"the gate ({gate_s} s) is longer than the bin ({bin_s} s)")
-    opts = {"bin_s": bin_s, "gate_s": gate_s,
+    opts = {"pose": pose, "bin_s": bin_s, "gate_s": gate_s,
             "t_start_s": t.number("t_start_s", unit="s"),
             "bit_order": t.string("bit_order", "big" if fmt == "npy" else "little", choices=("little", "big")),
             "bitpack_dim": t.integer("bitpack_dim", 2, minimum=1),
@@ -280,7 +349,7 @@ def _emva(t: _Table) -> dict | None:
 
 
 def _frames(t: _Table) -> SensorCalibration:
-    path, fmt, width, height, offset, hom = _sensor_common(t, "frames", FRAME_FORMATS)
+    path, fmt, width, height, offset, hom, pose = _sensor_common(t, "frames", FRAME_FORMATS)
     emva = _emva(t)
     required = _REQUIRED["frames"] if emva is None else tuple(k for k in _REQUIRED["frames"]
                                                                if k not in EMVA_MEASURED)
@@ -290,7 +359,7 @@ def _frames(t: _Table) -> SensorCalibration:
         raise t.error("bit_depth", f"at most 16 bits (frames are stored as uint16), got {bit_depth}")
     attrs["bit_depth"] = bit_depth
     attrs.setdefault("fill_factor", 1.0)
-    opts = {"emva": emva, "timestamps": t.file("timestamps"),
+    opts = {"pose": pose, "emva": emva, "timestamps": t.file("timestamps"),
             "frame_rate_hz": t.number("frame_rate_hz", positive=True, unit="Hz"),
             "exposure_s": t.number("exposure_s", positive=True, unit="s"),
             "t_start_s": t.number("t_start_s", 0.0, unit="s")}
@@ -305,13 +374,13 @@ def _frames(t: _Table) -> SensorCalibration:
 
 
 def _events(t: _Table) -> SensorCalibration:
-    path, fmt, width, height, offset, hom = _sensor_common(t, "events", EVENT_FORMATS)
+    path, fmt, width, height, offset, hom, pose = _sensor_common(t, "events", EVENT_FORMATS)
     attrs = _params(t, _EVENT_PARAMS, _REQUIRED["events"])
     attrs.setdefault("threshold_off", attrs["threshold_on"])
     attrs.setdefault("threshold_sigma", 0.0)
     if fmt == "npy" and (width is None or height is None):
         raise t.error("width" if width is None else "height", "required for a structured .npy event array")
-    return SensorCalibration("events", path, fmt, width, height, offset, hom, attrs, {})
+    return SensorCalibration("events", path, fmt, width, height, offset, hom, attrs, {"pose": pose})
 
 
 def load_calibration(path: str | Path) -> Calibration:
@@ -358,7 +427,16 @@ def load_calibration(path: str | Path) -> Calibration:
     width = ref.integer("width", first.width)
     height = ref.integer("height", first.height)
     valid_mask = ref.file("valid_mask")
+    k_ref = ref.matrix3("intrinsics", what="intrinsic matrix", normalise=False)
     ref.finish()
+    for kind, sc in list(sensors.items()):
+        pose = sc.options.get("pose")
+        if pose is None:
+            continue
+        if k_ref is None:
+            raise InputError("a sensor pose needs the reference camera's intrinsics", path=path,
+                             field="reference.intrinsics")
+        sensors[kind] = replace(sc, homography=pose_homography(pose["K"], pose["R"], pose["t"], pose["d"], k_ref))
 
     star = None
     if top.has("star"):
