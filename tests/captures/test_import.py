@@ -424,3 +424,26 @@ def test_a_pose_without_reference_intrinsics_or_with_a_homography_is_refused(exp
     cal = _calibration(tmp_path, spad=None, frames=None, extra_events=bad)
     with pytest.raises(InputError, match="events.rotation: not a rotation"):
         import_captures(cal, tmp_path / "a.h5", progress=False)
+
+
+def test_aedat4_without_dv_processing_says_what_to_install(exported, tmp_path, monkeypatch):
+    import sys
+
+    from simspad.errors import SimSpadError
+
+    monkeypatch.setitem(sys.modules, "dv_processing", None)  # import fails as when the package is absent
+    (tmp_path / "ev.aedat4").write_bytes(b"#!AER-DAT4.0\r\n")
+    cal = _calibration(tmp_path, spad=None, frames=None, events="ev.aedat4")
+    with pytest.raises(SimSpadError, match=r"ev\.aedat4: events\.format: reading AEDAT 4 needs the dv-processing"):
+        import_captures(cal, tmp_path / "a.h5", progress=False)
+    assert not (tmp_path / "a.h5").exists()
+
+
+def test_a_damaged_aedat4_file_is_one_line(exported, tmp_path):
+    pytest.importorskip("dv_processing")
+    (tmp_path / "ev.aedat4").write_bytes(b"garbage")
+    cal = _calibration(tmp_path, spad=None, frames=None, events="ev.aedat4", extra_events={"width": W, "height": H})
+    with pytest.raises(InputError) as info:
+        import_captures(cal, tmp_path / "a.h5", progress=False)
+    msg = info.value.format()
+    assert "ev.aedat4: events.path: not a readable AEDAT 4 file" in msg and "\n" not in msg

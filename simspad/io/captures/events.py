@@ -240,10 +240,17 @@ def _aedat4_reader(path: Path):
     try:
         reader = dv.io.MonoCameraRecording(str(path))
     except RuntimeError as exc:
-        raise InputError(f"not a readable AEDAT 4 file ({exc})", path=path) from None
+        raise InputError(f"not a readable AEDAT 4 file ({_dv_reason(exc)})", path=path, field="events.path") from None
     if not reader.isEventStreamAvailable():
         raise InputError("the AEDAT 4 file has no event stream", path=path, field="events")
     return reader
+
+
+def _dv_reason(exc: Exception) -> str:
+    """dv-processing's one-line reason from its multi-line message (source location, reason, C++ stack trace)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    info = next((line for line in lines if line.startswith("Error info:")), None)
+    return (info[len("Error info:"):].strip() if info else (lines[0] if lines else type(exc).__name__))[:200]
 
 
 def aedat4_size(path: Path) -> tuple[int, int] | None:
@@ -255,7 +262,10 @@ def read_aedat4(path: Path, chunk: int = CHUNK_EVENTS) -> Iterator[dict[str, np.
     """Events of an AEDAT 4 file's event stream, through dv-processing (its batches, as stored)."""
     reader = _aedat4_reader(path)
     while reader.isRunning():
-        batch = reader.getNextEventBatch()
+        try:
+            batch = reader.getNextEventBatch()
+        except RuntimeError as exc:
+            raise InputError(f"unreadable event data ({_dv_reason(exc)})", path=path, field="events") from None
         if batch is None:
             break
         arr = batch.numpy()
