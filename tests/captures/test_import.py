@@ -447,3 +447,32 @@ def test_a_damaged_aedat4_file_is_one_line(exported, tmp_path):
         import_captures(cal, tmp_path / "a.h5", progress=False)
     msg = info.value.format()
     assert "ev.aedat4: events.path: not a readable AEDAT 4 file" in msg and "\n" not in msg
+
+
+@pytest.mark.slow
+def test_a_folder_of_simulated_and_real_recordings_evaluates_and_ranks_both(exported, tmp_path):
+    """One folder: the simulated recording (scored against its ground truth) and its import (no ground truth,
+    a star region declared). Evaluate and leaderboard keep them apart: PSNR for the first, NaN — not 0 — for the
+    second, which the real-data section lists alone."""
+    from simspad.cli import main
+    from simspad.io.results_dir import read_csv
+
+    (tmp_path / "data").mkdir()
+    shutil.copy(exported / "orig.h5", tmp_path / "data" / "sim.h5")
+    text = _calibration(exported).read_text() + _table("star", {"center_px": [7.5, 5.5], "radius_px": 5.5,
+                                                                "n_cycles": 8})
+    (exported / "star_cal.toml").write_text(text)
+    import_captures(exported / "star_cal.toml", tmp_path / "data" / "real.h5", progress=False)
+    assert main(["evaluate", str(tmp_path / "data"), "--methods", "ni,cf", "--out", str(tmp_path / "res")]) == 0
+    rows = {(r["method"], r["recording"]): r for r in read_csv(tmp_path / "res" / "results.csv")}
+    for m in ("ni", "cf"):
+        sim, real = rows[(m, "sim.h5")], rows[(m, "real.h5")]
+        assert np.isfinite(sim["psnr_db"]) and np.isnan(real["psnr_db"]) and np.isnan(real["ssim"])
+        assert real["bandwidth_khz_per_pixel"] == pytest.approx(sim["bandwidth_khz_per_pixel"])
+        assert np.isfinite(real["mtf_at_0p40_cyc_px"]) and not real["error"]
+    assert main(["leaderboard", str(tmp_path / "res"), "--out", str(tmp_path / "board")]) == 0
+    md = (tmp_path / "board" / "leaderboard.md").read_text()
+    section = md.split("## Real captures (no ground truth)")[1]
+    assert "real.h5" in section and "sim.h5" not in section
+    assert len([line for line in section.splitlines() if line.startswith("| ") and "Method" not in line]) == 2
+    assert "Real captures (no ground truth)" in (tmp_path / "board" / "leaderboard.html").read_text()
