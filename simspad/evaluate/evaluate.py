@@ -13,6 +13,12 @@ For each recording × method (a *task*), following the protocol of :mod:`simspad
    fixed frequencies and MTF50 (:func:`simspad.evaluate.protocol.star_figures`);
 5. the method's bandwidth is read from the reconstruction once it has been iterated.
 
+Recordings without ground truth (real captures from ``simspad import``) are evaluated too
+(:mod:`simspad.evaluate.real_data`): every method the sensors allow runs at the instants ``t_start_s + k/rate_hz``
+of the recorded span; reconstructions, an image per method, the bandwidth and (where the recording declares a
+Siemens-star region) the MTF are saved; PSNR, SSIM and the white point are NaN, ``results.json`` says why, and the
+caller's ``preview`` writes a strip of the sensors per such recording.
+
 Tasks run in a process pool of at most 2 workers (forked where safe, else spawned), one recording's methods per job so that its ground
 truth is read, display-mapped and (Siemens star) analysed once for all of them
 (:class:`simspad.evaluate.protocol.GroundTruthCache`); rows come out in a deterministic order (recordings in

@@ -153,8 +153,8 @@ def test_homography_moves_events_and_resamples_bits_and_frames(exported, tmp_pat
     shutil.copytree(exported / "npz", tmp_path / "npz")
     shutil.copy(exported / "events.raw", tmp_path / "events.raw")
     text = _calibration(tmp_path).read_text()
-    text = text.replace("[spad]\n", f"[spad]\nhomography = {hom}\n").replace("[frames]\n", f"[frames]\nhomography = {hom}\n")
-    text = text.replace("[events]\n", f"[events]\nhomography = {hom}\n")
+    for table in ("spad", "frames", "events"):
+        text = text.replace(f"[{table}]\n", f"[{table}]\nhomography = {hom}\n")
     (tmp_path / "calibration.toml").write_text(text)
     s = import_captures(tmp_path / "calibration.toml", tmp_path / "imp.h5", progress=False)
     with open_recording(exported / "orig.h5") as a, open_recording(tmp_path / "imp.h5") as b:

@@ -278,7 +278,8 @@ def read_aedat4(path: Path, chunk: int = CHUNK_EVENTS) -> Iterator[dict[str, np.
 # -- tonic-style structured arrays -----------------------------------------------------------------------------
 
 def read_npy(path: Path, chunk: int = CHUNK_EVENTS) -> Iterator[dict[str, np.ndarray]]:
-    """Events of a structured ``.npy`` array with fields ``x``, ``y``, ``t`` (µs) and ``p`` (> 0: ON), memory-mapped."""
+    """Events of a structured ``.npy`` array with fields ``x``, ``y``, ``t`` (µs) and ``p`` (> 0: ON), read
+    memory-mapped."""
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
     except (OSError, ValueError) as exc:
