@@ -36,7 +36,7 @@ from tqdm import tqdm
 
 from simspad import __version__
 from simspad.analysis.emva import photon_transfer
-from simspad.captures.geometry import SensorWarp
+from simspad.captures.geometry import SensorWarp, pose_homography
 from simspad.errors import InputError
 from simspad.io.captures import events as event_files
 from simspad.io.captures import spad as spad_files
@@ -270,6 +270,10 @@ def import_captures(calibration_path, out, *, progress: bool = True, chunk_event
     cal = replace(cal, width=width, height=height)
     warps = {}
     for s in sensors:
+        pose = s.cal.options.get("pose")
+        if pose is not None:
+            s.cal = replace(s.cal, homography=pose_homography(pose["K"], pose["R"], pose["t"], pose["d"],
+                                                              cal.reference_intrinsics))
         if s.cal.homography is None and s.shape != (height, width):
             raise InputError(f"the sensor is {s.shape[1]} × {s.shape[0]} pixels, the reference grid {width} × "
                              f"{height}: give a homography onto the grid", path=cal.path,

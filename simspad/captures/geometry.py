@@ -1,5 +1,8 @@
 """Putting each sensor on the reference grid: homographies applied to events, binary frames and images.
 
+A sensor's homography is given in the calibration, or derived from its pose (intrinsics K, rotation R,
+translation t onto the reference camera and the distance of the scene plane) by :func:`pose_homography`.
+
 A sensor's homography ``Hs`` (3×3) maps its pixel coordinates to the reference grid's:
 ``(u, v, w)ᵀ = Hs·(x, y, 1)ᵀ``, reference pixel ``(u/w, v/w)``; pixel (x, y) is the centre of column x, row y.
 
@@ -25,8 +28,40 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from simspad.io.captures.calibration import inverse3
 
+
+def pose_homography(k_sensor: np.ndarray, rotation: np.ndarray, translation_m: np.ndarray, plane_distance_m: float,
+                    k_reference: np.ndarray) -> np.ndarray:
+    """The homography from the sensor's pixels to the reference camera's induced by a scene plane.
+
+    A point X in the sensor camera's frame is ``R·X + t`` in the reference camera's; on the plane ``nᵀX = d`` with
+    n = (0, 0, 1) (facing the sensor, at distance d along its optical axis) that is ``(R + t·nᵀ/d)·X``, so pixels
+    map by ``H = K_ref·(R + t·nᵀ/d)·K_sensor⁻¹`` (Hartley & Zisserman, eq. 13.2), normalised to H[2, 2] = 1.
+    """
+    plane = np.zeros((3, 3))
+    plane[:, 2] = np.asarray(translation_m, np.float64) / plane_distance_m  # t·nᵀ/d with n = (0, 0, 1)
+    h = matmul3(matmul3(k_reference, rotation + plane), inverse3(k_sensor))
+    return h / h[2, 2]
+
+
+def matmul3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a·b`` of 3×3 matrices as element-wise products summed in a fixed order: the same bits on every CPU
+    (a BLAS product's rounding depends on the kernel the CPU selects; docs/internals.md, Determinism)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a[:, 0, None] * b[0] + a[:, 1, None] * b[1] + a[:, 2, None] * b[2]
+
+
+def inverse3(m: np.ndarray) -> np.ndarray:
+    """Inverse of a 3×3 matrix by its adjugate (no LAPACK, for the same reason as :func:`matmul3`)."""
+    m = np.asarray(m, np.float64)
+    cof = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            r = [k for k in range(3) if k != i]
+            c = [k for k in range(3) if k != j]
+            cof[i, j] = (-1) ** (i + j) * (m[r[0], c[0]] * m[r[1], c[1]] - m[r[0], c[1]] * m[r[1], c[0]])
+    det = m[0, 0] * cof[0, 0] + m[0, 1] * cof[0, 1] + m[0, 2] * cof[0, 2]
+    return cof.T / det
 
 def apply_homography(h: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Map coordinates ``(x, y)`` (float64 arrays) by the homography ``h``; returns ``(u, v)``."""

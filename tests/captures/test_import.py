@@ -385,7 +385,7 @@ def test_a_pose_gives_the_plane_induced_homography(exported, tmp_path):
     """K, R, t and a plane at distance d: H = K_ref (R + t nᵀ/d) K⁻¹. A sideways baseline of 2 cm to a plane 1 m
     away at f = 100 px shifts the image by 2 px (the event stream lands as under that shift's homography); a
     rotation alone gives K R K⁻¹, whatever the distance."""
-    from simspad.io.captures.calibration import pose_homography
+    from simspad.captures.geometry import pose_homography
 
     K = [[100.0, 0.0, 8.0], [0.0, 100.0, 6.0], [0.0, 0.0, 1.0]]
     shutil.copytree(exported / "npz", tmp_path / "npz")

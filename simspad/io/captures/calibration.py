@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +45,8 @@ class SensorCalibration:
         Added to the sensor's timestamps to put them on the rig's common clock, s.
     homography : ndarray [3, 3] or None
         Maps sensor pixel coordinates (x, y, 1) to reference-grid coordinates; None: identity (the sensor is the
-        reference grid).
+        reference grid), or given by ``options["pose"]`` (``K``, ``R``, ``t``, ``d``: see
+        :func:`simspad.captures.geometry.pose_homography`).
     attrs : dict
         The sensor's response parameters, stored as the group's attributes (units in the names).
     options : dict
@@ -91,6 +92,8 @@ class Calibration:
     valid_mask: Path | None
     star: StarRegion | None
     sensors: dict[str, SensorCalibration]
+    reference_intrinsics: np.ndarray | None = None
+    """K of the reference camera, px (for sensors given by a pose)."""
 
 
 class _Table:
@@ -266,39 +269,6 @@ def _pose(t: _Table) -> dict | None:
             "d": t.number("plane_distance_m", positive=True, required=True, unit="m")}
 
 
-def pose_homography(k_sensor: np.ndarray, rotation: np.ndarray, translation_m: np.ndarray, plane_distance_m: float,
-                    k_reference: np.ndarray) -> np.ndarray:
-    """The homography from the sensor's pixels to the reference camera's induced by a scene plane.
-
-    A point X in the sensor camera's frame is ``R·X + t`` in the reference camera's; on the plane ``nᵀX = d`` with
-    n = (0, 0, 1) (facing the sensor, at distance d along its optical axis) that is ``(R + t·nᵀ/d)·X``, so pixels
-    map by ``H = K_ref·(R + t·nᵀ/d)·K_sensor⁻¹`` (Hartley & Zisserman, eq. 13.2), normalised to H[2, 2] = 1.
-    """
-    plane = np.zeros((3, 3))
-    plane[:, 2] = np.asarray(translation_m, np.float64) / plane_distance_m  # t·nᵀ/d with n = (0, 0, 1)
-    h = matmul3(matmul3(k_reference, rotation + plane), inverse3(k_sensor))
-    return h / h[2, 2]
-
-
-def matmul3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a·b`` of 3×3 matrices as element-wise products summed in a fixed order: the same bits on every CPU
-    (a BLAS product's rounding depends on the kernel the CPU selects; docs/internals.md, Determinism)."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    return a[:, 0, None] * b[0] + a[:, 1, None] * b[1] + a[:, 2, None] * b[2]
-
-
-def inverse3(m: np.ndarray) -> np.ndarray:
-    """Inverse of a 3×3 matrix by its adjugate (no LAPACK, for the same reason as :func:`matmul3`)."""
-    m = np.asarray(m, np.float64)
-    cof = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            r = [k for k in range(3) if k != i]
-            c = [k for k in range(3) if k != j]
-            cof[i, j] = (-1) ** (i + j) * (m[r[0], c[0]] * m[r[1], c[1]] - m[r[0], c[1]] * m[r[1], c[0]])
-    det = m[0, 0] * cof[0, 0] + m[0, 1] * cof[0, 1] + m[0, 2] * cof[0, 2]
-    return cof.T / det
-
 def _spad(t: _Table) -> SensorCalibration:
     path, fmt, width, height, offset, hom, pose = _sensor_common(t, "spad", SPAD_FORMATS)
     attrs = _params(t, _SPAD_PARAMS, _REQUIRED["spad"])
@@ -429,14 +399,9 @@ def load_calibration(path: str | Path) -> Calibration:
     valid_mask = ref.file("valid_mask")
     k_ref = ref.matrix3("intrinsics", what="intrinsic matrix", normalise=False)
     ref.finish()
-    for kind, sc in list(sensors.items()):
-        pose = sc.options.get("pose")
-        if pose is None:
-            continue
-        if k_ref is None:
-            raise InputError("a sensor pose needs the reference camera's intrinsics", path=path,
-                             field="reference.intrinsics")
-        sensors[kind] = replace(sc, homography=pose_homography(pose["K"], pose["R"], pose["t"], pose["d"], k_ref))
+    if k_ref is None and any(sc.options.get("pose") for sc in sensors.values()):
+        raise InputError("a sensor pose needs the reference camera's intrinsics", path=path,
+                         field="reference.intrinsics")
 
     star = None
     if top.has("star"):
@@ -454,4 +419,4 @@ def load_calibration(path: str | Path) -> Calibration:
         star = StarRegion(float(centre[0]), float(centre[1]), radius, n_cycles, contrast)
     top.finish()
     return Calibration(path, text, name, scene, lux, t_start_s, duration_s, rate_hz, width, height,
-                       valid_mask, star, sensors)
+                       valid_mask, star, sensors, k_ref)
