@@ -250,6 +250,20 @@ def export(recording, fmt, out_path, packing, frames_format):
     export_from_cli(recording, fmt, out_path, packing=packing, frames_format=frames_format)
 
 
+@cli.command(name="import")
+@click.argument("calibration", type=click.Path(path_type=Path))
+@click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
+              help="Recording to write (.h5).")
+@click.option("--spad-compression", "compression", type=click.Choice(["zstd", "gzip", "none"]), default="zstd",
+              show_default=True, help="Storage filter of /spad/bits.")
+@click.option("--no-progress", is_flag=True, help="No progress bars.")
+def import_(calibration, out_path, compression, no_progress):
+    """Build a recording from real captures described by CALIBRATION (.toml; docs/format.md section 9)."""
+    from simspad.cli.import_captures import import_from_cli  # deferred: `simspad --help` stays 0.25 s
+
+    import_from_cli(calibration, out_path, compression=compression, progress=not no_progress)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI, turning user errors into one line on stderr and a non-zero exit.
 

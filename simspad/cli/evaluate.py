@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from simspad.analysis.preview import write_preview
 from simspad.cli.simulate import parse_value
 from simspad.errors import SimSpadError
 from simspad.evaluate.evaluate import EvaluationFailed, evaluate
@@ -19,6 +20,11 @@ def summary_table(rows: list[dict]) -> str:
         key = recording_key(r["sequence"], r["lux"], r.get("speed_factor", 1.0))[:28]
         if r.get("error"):
             lines.append(f"{r['method'][:20]:<20} {key:<28} FAILED: {r['error'][:80]}")
+        elif r["psnr_db"] != r["psnr_db"] and r.get("white_point_ph_s_m2") != r.get("white_point_ph_s_m2"):
+            # no ground truth (a real capture): the scores do not exist, they are not zero
+            lines.append(f"{r['method'][:20]:<20} {key:<28} {'n/a':>8} {'n/a':>6} {r['bandwidth_khz_per_pixel']:9.3f}"
+                         f"  (no ground truth; MTF {r['mtf_at_0p25_cyc_px']:.3f} at 0.25, "
+                         f"{r['mtf_at_0p40_cyc_px']:.3f} at 0.40 cyc/px)")
         else:
             lines.append(f"{r['method'][:20]:<20} {key:<28} {r['psnr_db']:8.2f} {r['ssim']:6.3f} "
                          f"{r['bandwidth_khz_per_pixel']:9.3f}")
@@ -47,12 +53,18 @@ def parse_method_params(items) -> dict[str, dict]:
     return out
 
 
+def preview_strip(recording: Path, out: Path) -> None:
+    """A PNG strip of a recording's sensors (``simspad preview``), for recordings without ground truth."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_preview(recording, out)
+
+
 def evaluate_from_cli(target, methods=None, out_dir=None, rate_hz=None, params=()) -> Path:
     """The ``simspad evaluate`` command: evaluate, print a summary and the per-method timings, raise
     EvaluationFailed if a run failed."""
     timings: list[dict] = []
     out, rows = evaluate(target, methods=methods, out_dir=out_dir, rate_hz=rate_hz, timings=timings,
-                         params=parse_method_params(params))
+                         params=parse_method_params(params), preview=preview_strip)
     click.echo(summary_table(rows))
     click.echo("")
     click.echo("timings (method s: inside the method; total s: with scoring and writing; summed over workers)")

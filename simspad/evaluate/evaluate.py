@@ -13,6 +13,12 @@ For each recording × method (a *task*), following the protocol of :mod:`simspad
    fixed frequencies and MTF50 (:func:`simspad.evaluate.protocol.star_figures`);
 5. the method's bandwidth is read from the reconstruction once it has been iterated.
 
+Recordings without ground truth (real captures from ``simspad import``) are evaluated too
+(:mod:`simspad.evaluate.real_data`): every method the sensors allow runs at the instants ``t_start_s + k/rate_hz``
+of the recorded span; reconstructions, an image per method, the bandwidth and (where the recording declares a
+Siemens-star region) the MTF are saved; PSNR, SSIM and the white point are NaN, ``results.json`` says why, and the
+caller's ``preview`` writes a strip of the sensors per such recording.
+
 Tasks run in a process pool of at most 2 workers (forked where safe, else spawned), one recording's methods per job so that its ground
 truth is read, display-mapped and (Siemens star) analysed once for all of them
 (:class:`simspad.evaluate.protocol.GroundTruthCache`); rows come out in a deterministic order (recordings in
@@ -55,6 +61,7 @@ from simspad.evaluate.protocol import (
     score_frames,
     star_figures,
 )
+from simspad.evaluate.real_data import NO_GT_NOTE, evaluation_times, score_without_gt, star_region
 from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
 from simspad.io.output_dirs import owned_output_dir
 from simspad.io.reconstructions import ReconstructionSink
@@ -127,6 +134,8 @@ def run_task(task: Task, gt_cache: GroundTruthCache | None = None, rec=None) -> 
 
 
 def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
+    if not rec.has("gt"):
+        return _run_task_without_gt(task, rec)
     e = task.entry
     idx = evaluation_indices(rec.gt.t, task.rate_hz)
     white = task.white if task.white is not None else gt_white_point(rec, idx)
@@ -171,9 +180,54 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
     return out
 
 
+def _run_task_without_gt(task: Task, rec) -> dict:
+    """One method on a recording without ground truth (:mod:`simspad.evaluate.real_data`): reconstructions,
+    bandwidth, an image and the declared star's MTF; PSNR and SSIM stay NaN."""
+    e = task.entry
+    row = _base_row(task, float("nan"))
+    out = {"row": row, "frame_rows": [], "mtf_rows": []}
+    try:
+        method = get_method(task.method, **task.params)
+        row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
+        missing = [k for k in method.requires if not rec.has(k)]
+        if missing:
+            raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
+        times = evaluation_times(rec, task.rate_hz)
+        sink = None
+        if task.save_reconstructions:
+            sink = ReconstructionSink(task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5",
+                                      times, (rec.height, rec.width),
+                                      {"method": task.method, "recording": e.rel, "units": "photons s-1 m-2"})
+        try:
+            reco = method.reconstruct(rec, times)
+            res = score_without_gt(rec, times, reco, star_region(rec), frame_sink=sink)
+        finally:
+            if sink is not None:
+                sink.close()
+        bw = reco.bandwidth
+        row.update(n_frames=res["n_frames"], runtime_s=round(res["method_s"], 3),
+                   bandwidth_khz_per_pixel=float(bw.readout_khz_per_pixel),
+                   bandwidth_bits_per_pixel_s=float(bw.bits_per_pixel_s))
+        if res["image"] is not None:
+            path = task.work_dir / "images" / slug(e.key) / f"{slug(task.method)}.png"
+            save_png(path, crop(res["image"]))
+            row["image"] = path.relative_to(task.work_dir).as_posix()
+        if res["mtf"] is not None:
+            f, m = res["mtf"]
+            row.update(star_figures(res["mtf"]))
+            out["mtf_rows"] = [{"method": task.method, "recording": e.rel, "freq_cyc_px": float(a),
+                                "mtf": float(b)} for a, b in zip(f, m)]
+    except Exception as exc:  # a method's failure is a result, not the end of the run
+        row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+        (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
+    return out
+
+
 def write_gt_image(work_dir: Path, entry: RecordingEntry, rate_hz: float, white: float) -> None:
     """The ground-truth crop of the chosen instant even when every method failed."""
     with open_recording(entry.path) as rec:
+        if not rec.has("gt"):
+            return  # a real capture: nothing to show
         idx = evaluation_indices(rec.gt.t, rate_hz)
         if idx.size == 0:
             return
@@ -286,7 +340,8 @@ def timing_rows(tasks: list[Task], results: list[dict]) -> list[dict]:
 
 def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
              save_reconstructions: bool = True, progress: bool = True,
-             timings: list | None = None, params: dict | None = None) -> tuple[Path, list[dict]]:
+             timings: list | None = None, params: dict | None = None,
+             preview=None) -> tuple[Path, list[dict]]:
     """Evaluate ``methods`` on every recording of ``target`` and write the results directory ``out_dir``.
 
     Parameters
@@ -309,6 +364,10 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     params : dict of str to dict, optional
         Method name → parameters (``--param``), over the dataset spec's ``evaluation.params``; recorded in
         results.csv's ``params`` column and results.json's ``params``.
+    preview : callable(recording_path, png_path), optional
+        Writes a preview strip of each recording without ground truth into the results directory
+        (``previews/<key>.png``); the CLI passes :func:`simspad.analysis.preview.write_preview`, which this layer
+        cannot import.
 
     Returns
     -------
@@ -336,10 +395,18 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     whites = {}
     for e in entries:
         with open_recording(e.path) as rec:
+            names = list(methods) if methods else available_methods(rec)
+            if not rec.has("gt"):  # a real capture (simspad import): scored without ground truth
+                if evaluation_times(rec, float(rate_hz)).size == 0:
+                    raise SimSpadError(f"no instant at {rate_hz:g} Hz inside the recorded span", path=e.path,
+                                       field="/.t_end_s")
+                whites[e.rel] = None
+                tasks.extend(Task(e, m, float(rate_hz), Path(), save_reconstructions, None,
+                                  method_params.get(m, {})) for m in names)
+                continue
             idx = evaluation_indices(rec.gt.t, rate_hz)
             if idx.size == 0:
                 raise SimSpadError("no ground-truth instants to evaluate", path=e.path, field="/gt/t")
-            names = list(methods) if methods else available_methods(rec)
             whites[e.rel] = gt_white_point(rec, idx)  # once per recording, shared by its tasks
         tasks.extend(Task(e, m, float(rate_hz), Path(), save_reconstructions, whites[e.rel],
                           method_params.get(m, {})) for m in names)
@@ -354,15 +421,22 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         if timings is not None:
             timings.extend(timing)
         for e in entries:
-            if not (tmp / "images" / slug(e.key) / "gt.png").exists():
+            if whites[e.rel] is not None and not (tmp / "images" / slug(e.key) / "gt.png").exists():
                 write_gt_image(tmp, e, rate_hz, whites[e.rel])
+            elif whites[e.rel] is None and preview is not None:
+                preview(e.path, tmp / "previews" / f"{slug(e.key)}.png")
         meta = {"format": "simspad-results", "format_version": 1, "simspad_version": __version__,
                 "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                 "kind": "evaluate", "target": str(target), "rate_hz": rate_hz,
                 "methods": sorted({t.method for t in tasks}),
                 "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
                                 "lux": e.lux, "speed_factor": e.speed_factor,
-                                "image_speed_px_s": e.image_speed_px_s, **e.about} for e in entries],
+                                "image_speed_px_s": e.image_speed_px_s, **e.about,
+                                "ground_truth": whites[e.rel] is not None,
+                                **({"preview": f"previews/{slug(e.key)}.png"}
+                                   if whites[e.rel] is None and preview is not None else {})}
+                               for e in entries],
+                **({"notes": [NO_GT_NOTE]} if any(w is None for w in whites.values()) else {}),
                 "protocol": protocol_metadata(), "timings": timing,
                 **({"params": {m: p for m, p in sorted(method_params.items())
                                if any(t.method == m for t in tasks)}} if method_params else {}),

@@ -107,9 +107,6 @@ def _attr_float(attrs, name: str, default: float, path: Path) -> float:
 def fill_entry(entry: RecordingEntry) -> RecordingEntry:
     """Read sequence, scene, lux and the speed attributes from the recording's attributes (validating the file)."""
     with open_recording(entry.path) as rec:
-        if not rec.has("gt"):
-            raise SimSpadError("recording has no ground truth (/gt): nothing to score against", path=entry.path,
-                               field="/gt")
         if rec.has("events"):
             rec.events.check_time_order()  # methods find event windows by binary search on the timestamps
         entry.sequence = str(rec.attrs.get("sequence") or entry.extra.get("sequence") or rec.scene

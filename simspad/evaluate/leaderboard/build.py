@@ -10,8 +10,9 @@ from pathlib import Path
 
 from simspad.errors import SimSpadError
 from simspad.evaluate.leaderboard.board import build_board
-from simspad.evaluate.leaderboard.html_page import render_html
-from simspad.evaluate.leaderboard.markdown_page import render_markdown
+from simspad.evaluate.leaderboard.html_page import _html_table, render_html
+from simspad.evaluate.leaderboard.markdown_page import md_escape, md_table, render_markdown
+from simspad.evaluate.leaderboard.real_data import real_data_html, real_data_markdown, real_recordings
 from simspad.evaluate.leaderboard.plots import (
     plot_budget_fronts,
     plot_psnr_vs_bandwidth,
@@ -108,10 +109,13 @@ def _write_leaderboard(results_dirs: list[Path], out_dir: Path) -> set[str]:
         strip_files.append((title, fname))
     with atomic_path(out_dir / "leaderboard.csv") as tmp:
         write_csv_table(tmp, board)
+    real = real_recordings(results_dirs)  # recordings without ground truth: a section of their own
     with atomic_path(out_dir / "leaderboard.md") as tmp:
-        tmp.write_text(render_markdown(board, plot_files, strip_files, regime, regime_files, strip_note),
-                       encoding="utf-8")
+        tmp.write_text(render_markdown(board, plot_files, strip_files, regime, regime_files, strip_note)
+                       + real_data_markdown(board, real, md_table, md_escape), encoding="utf-8")
     with atomic_path(out_dir / "leaderboard.html") as tmp:
-        tmp.write_text(render_html(board, plots, strips, regime, regime_pngs, strip_note), encoding="utf-8")
+        page = render_html(board, plots, strips, regime, regime_pngs, strip_note)
+        tmp.write_text(page.replace("</body></html>", real_data_html(board, real, _html_table) + "</body></html>"),
+                       encoding="utf-8")
     written |= {"leaderboard.csv", "leaderboard.md", "leaderboard.html"}
     return written
