@@ -11,7 +11,8 @@ of everything that determines its pixels, so re-runs re-use frames and an interr
 
 A render is three stages (:mod:`simspad.render.render_plan`): :func:`plan_render` (keyframe instants, poses and
 names), :func:`render_keyframes` (any list of keyframe indices, in any process: ``simspad generate`` spreads
-chunks of them over its workers) and :func:`finalize_render` (``timeline.json``, once every keyframe exists).
+chunks of them over its workers) with :func:`render_probe` (keyframe 0 again with the next seed: the render-noise
+budget's probe), and :func:`finalize_render` (``timeline.json`` with the budget, once every keyframe exists).
 :func:`render_sequence` runs the three in one process.
 
 With ``interpolation = "warp"`` (opt-in, :mod:`simspad.render.settings` says why it is not the default) only
@@ -80,7 +81,8 @@ from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, render_noise_budget
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
-           "load_scene", "plan_render", "render_keyframes", "render_sequence", "select_variant", "with_warp_results"]
+           "load_scene", "plan_render", "render_keyframes", "render_probe", "render_sequence", "select_variant",
+           "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
 RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
@@ -317,6 +319,20 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     return _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
 
 
+def render_probe(scene, trajectory, plan: RenderPlan, *, out_dir, loaded: LoadedScene | None = None) -> bool:
+    """Stage 2b: the render-noise budget's noise probe (keyframe 0 again with the next seed,
+    :func:`~simspad.render.warp_render.render_noise_probe`) into ``out_dir`` unless it is there; in any process, like
+    :func:`render_keyframes` (whose arguments these are). True if it was rendered now."""
+    out_dir = Path(out_dir)
+    if (out_dir / noise_probe_name(plan)).is_file():
+        return False
+    make_out_dir(out_dir)
+    if loaded is None:
+        loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
+    _check_same_inputs(plan, loaded)
+    return render_noise_probe(loaded.ms, loaded.ts, plan, out_dir)
+
+
 def finalize_render(plan: RenderPlan, out_dir) -> Path:
     """Stage 3: write ``timeline.json`` (which marks the render directory complete) once every keyframe file of
     ``plan`` exists, and delete frames of earlier renders into the same directory that it does not reference.
@@ -333,7 +349,7 @@ def finalize_render(plan: RenderPlan, out_dir) -> Path:
                            path=out_dir)
     path = write_timeline_json(out_dir, width=plan.width, height=plan.height, keyframes=plan.keyframes(),
                                **plan.timeline, render_noise=measure_render_noise(plan, out_dir))
-    remove_stale_frames(out_dir, set(plan.names))
+    remove_stale_frames(out_dir, set(plan.names) | {noise_probe_name(plan)})
     return path
 
 
@@ -419,7 +435,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                                 progress=progress, loaded=loaded)
         # The render-noise budget's probe (the warp schedule renders it for its own use): one keyframe more.
         tic = time.perf_counter()
-        probe_s = time.perf_counter() - tic if render_noise_probe(loaded.ms, loaded.ts, plan, out_dir) else 0.0
+        probe_s = time.perf_counter() - tic if render_probe(scene, trajectory, plan, out_dir=out_dir,
+                                                            loaded=loaded) else 0.0
     finalize_render(plan, out_dir)
     render_noise = json.loads((out_dir / TIMELINE_FILE).read_text()).get("render_noise")
     schedule = plan.timeline["schedule"]

@@ -9,6 +9,7 @@ tests (:func:`choose_variant` is a pure function of :class:`Backends`), not by a
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -167,3 +168,35 @@ def test_scalar_fallback_renders_every_builtin_scene_with_llvms_statistics(simsp
     seed_spread = float(np.abs(llvm[1] / llvm[0] - 1).max())
     worst = float(np.abs(scalar / llvm[0] - 1).max())
     assert worst <= max(0.10, 1.5 * seed_spread), (worst, seed_spread)
+
+
+# ------------------------------------------------------------------------------------- the estimate's workers
+def _estimate(render_gpu=None):
+    from simspad.dataset.estimate import Estimate  # deferred: only these tests need the dataset layer
+
+    return Estimate(n_renders=2, n_keyframes=36000, n_recordings=10, render_cpu_s=36000.0, sim_cpu_s=3600.0,
+                    longest_sim_s=100.0, largest_render_cpu_s=18000.0, keyframe_s=[(1.0, 18000), (1.0, 18000)],
+                    scene_load_s=[(0.5, 18000), (0.5, 18000)], disk_bytes=1, recordings_bytes=1, renders_bytes=0,
+                    peak_render_rss_bytes=None, peak_sim_rss_bytes=None, cores=2, plan_s=1.0, n_noise_probes=2,
+                    render_gpu=render_gpu)
+
+
+def test_the_estimate_puts_renders_on_the_gpu_and_simulations_on_the_cores():
+    from simspad.dataset.estimate import UnitCosts, format_estimate  # deferred: as above
+
+    cpu, gpu = _estimate(), _estimate("NVIDIA H200")
+    sims_2, sims_64 = max(3600 / 2, 100.0), max(3600 / 64, 100.0)
+    # on the CPU the renders spread over the workers; on one GPU they take its time whatever the workers
+    assert cpu.wall_s(64) < cpu.wall_s(2) / 20
+    assert gpu.wall_s(2) - sims_2 == pytest.approx(gpu.wall_s(64) - sims_64)
+    # every keyframe on the GPU, plus a scene load per chunk of (at most 64) keyframes
+    assert gpu.wall_s(64) - sims_64 == pytest.approx(36000.0 + 2 * 0.5 * math.ceil(18000 / 64), rel=1e-9)
+    assert gpu.wall_s(64, gpus=64) < gpu.wall_s(64) / 20  # a GPU per worker: they spread again
+    costs = UnitCosts(render_gpu="NVIDIA H200", render_variant=CUDA_VARIANT)
+    text = format_estimate(gpu, costs, workers=2, cluster_workers=(64,))
+    assert "10.00 GPU-h on NVIDIA H200 (cuda_ad_rgb, measured on it)" in text
+    assert "total        10.00 GPU-h + 1.00 CPU-h" in text
+    assert "here (2 worker(s), renders on one NVIDIA H200)" in text
+    assert "on 64 workers with one NVIDIA H200 each" in text and "render s/keyframe (the GPU)" in text
+    assert "and 2 noise probes" in text
+    assert "GPU" not in format_estimate(cpu, UnitCosts(render_variant=LLVM_VARIANT), workers=2)
