@@ -90,7 +90,7 @@ def render_noise_budget(y0: np.ndarray, y1: np.ndarray, threshold_log: float = D
 
     ``spurious_event_fraction`` here is the bright-light limit: the log of luminance itself (a floor of
     :data:`LOG_FLOOR_OF_MEAN` of the mean), as a sensor whose dark current is negligible sees it. A recording
-    states its own figure at its lux level (:func:`recording_spurious_fraction` in the sensors).
+    states its own figure at its lux level (:func:`simspad.sensors.render_noise.render_noise_attrs`).
     """
     median, rms = relative_noise(y0, y1)
     floor = LOG_FLOOR_OF_MEAN * max(float(np.mean(y0)), np.finfo(np.float64).tiny)

@@ -37,9 +37,12 @@ import numpy as np
 from tqdm import tqdm
 
 from simspad.errors import SimSpadError
+from simspad.io.exr import read_exr
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
+from simspad.physics.radiometry import luminance_from_rgb
+from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, render_noise_budget
 from simspad.render.flow import (
     camera_poses,
     max_step_flow,
@@ -75,9 +78,6 @@ from simspad.render.warp_render import (
     render_noise_probe,
     render_with_warps,
 )
-from simspad.io.exr import read_exr
-from simspad.physics.radiometry import luminance_from_rgb
-from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, render_noise_budget
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import h5py
 import numpy as np
@@ -14,6 +15,8 @@ from scipy.stats import norm
 
 from simspad.errors import InputError
 from simspad.io.exr import read_exr
+from simspad.io.recording import open_recording
+from simspad.io.render_dir import write_render_dir
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.noise_budget import (
     DEFAULT_THRESHOLD_LOG,
@@ -154,8 +157,6 @@ def test_every_recording_states_its_budget_at_its_own_lux(office, tmp_path, sims
 
 @pytest.mark.slow
 def test_a_render_without_a_probe_gives_nan_and_a_hostile_probe_path_is_refused(office, tmp_path, simspad_cli):
-    import shutil
-
     bare = tmp_path / "bare"
     shutil.copytree(office, bare)
     meta = json.loads((bare / "timeline.json").read_text())
@@ -196,8 +197,6 @@ def test_the_fraction_is_what_the_event_simulator_fires_when_the_noise_is_drawn_
     seconds at 10 lx, where the photoreceptor's cutoff falls with the photocurrent: after 45 ms only 14 % of the
     pixels had fired there, against 59 % settled, so in dim light the figure is an upper bound for noise that
     renews faster than the photoreceptor follows (docs/rendering.md)."""
-    from simspad.io.render_dir import write_render_dir
-    from simspad.io.recording import open_recording
 
     meta = json.loads((office / "timeline.json").read_text())
     probe = meta["render_noise"]["probe_file"]
@@ -206,8 +205,6 @@ def test_the_fraction_is_what_the_event_simulator_fires_when_the_noise_is_drawn_
     step = tmp_path / "step"
     write_render_dir(step, [0.0, 0.005, 0.005 + hold_s], np.stack([rgb0, rgb1, rgb1]),
                      render_noise=dict(meta["render_noise"], probe_file="frames/probe.exr"))
-    import shutil
-
     shutil.copy(office / probe, step / "frames" / "probe.exr")
     quiet = EventParams(threshold_sigma=0.0, shot_noise_rate_hz_at_1lux=0.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0)
     path = simulate_recording(step, tmp_path / "step.h5", RecordingSettings(lux=lux, sensors={"events": quiet},
