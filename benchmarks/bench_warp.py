@@ -5,8 +5,8 @@ For every built-in scene (its default trajectory) and for a fast pan with parall
 wall + boxes, a yaw burst plus translation) it measures
 
 1. Mitsuba renders per sequence: keyframes rendered (plus the noise-probe render every render makes: the
-   render-noise budget's, and the warp schedule's reference), the blocks rendered into synthesized keyframes where the warps disagree, counted by their pixel samples as a
-   fraction of a whole render), the warp schedule's 1-spp depth + id passes (one per synthesized keyframe) and
+   render-noise budget's, and the warp schedule's reference; and the blocks rendered into synthesized keyframes
+   where the warps disagree, counted by their pixel samples as a fraction of a whole render), the warp schedule's 1-spp depth + id passes (one per synthesized keyframe) and
    its emission passes (one per keyframe, the emission layer), and the whole render work (``cost``: every pass in
    whole renders, at the price of each kind of pass measured on the scene's first keyframe; the goal is judged
    on it); the wall-time columns say what everything cost;
