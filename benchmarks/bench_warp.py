@@ -4,9 +4,9 @@ of the linear schedule (``--interpolation linear``, the naive reference), in the
 For every built-in scene (its default trajectory) and for a fast pan with parallax (bench_render.py's textured
 wall + boxes, a yaw burst plus translation) it measures
 
-1. Mitsuba renders per sequence: keyframes rendered (plus the warp schedule's noise-probe render, and
-   the blocks rendered into synthesized keyframes where the warps disagree, counted by their pixel samples as a
-   fraction of a whole render), the warp schedule's 1-spp depth + id passes (one per synthesized keyframe) and
+1. Mitsuba renders per sequence: keyframes rendered (plus the noise-probe render every render makes: the
+   render-noise budget's, and the warp schedule's reference; and the blocks rendered into synthesized keyframes
+   where the warps disagree, counted by their pixel samples as a fraction of a whole render), the warp schedule's 1-spp depth + id passes (one per synthesized keyframe) and
    its emission passes (one per keyframe, the emission layer), and the whole render work (``cost``: every pass in
    whole renders, at the price of each kind of pass measured on the scene's first keyframe; the goal is judged
    on it); the wall-time columns say what everything cost;
@@ -58,7 +58,7 @@ HERE = Path(__file__).resolve().parent
 LUX = 1000.0
 #: Event camera with its own noise sources off: only radiance changes make events.
 QUIET_EVENTS = replace(EventParams(), shot_noise_rate_hz_at_1lux=0.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0)
-NOISE_PROBE_RENDERS = 1  # render_noise_probe() in render/warp_render.py (keyframe 0 again, next seed)
+NOISE_PROBE_RENDERS = 1  # render_noise_probe() in render/warp_render.py (keyframe 0 again, next seed), every render
 
 
 def converged(scene, ts, instants, res, spp) -> dict[float, np.ndarray]:
@@ -119,8 +119,9 @@ def run(scene, ts, settings: RenderSettings, out: Path, with_geometry: bool = Fa
     tl = Timeline.open(out)
     warp = tl.meta["schedule"].get("warp", {})
     # Blocks rendered into synthesized keyframes count by their pixel samples, as a fraction of a whole render.
-    n = (s.n_keyframes - s.n_warped + (NOISE_PROBE_RENDERS if settings.interpolation == "warp" else 0)
-         + float(warp.get("patch_renders", 0.0)))
+    # Every render renders one noise probe (the render-noise budget's; the warp schedule judges its warps against
+    # it too), linear and warp alike.
+    n = s.n_keyframes - s.n_warped + NOISE_PROBE_RENDERS + float(warp.get("patch_renders", 0.0))
     if with_geometry:
         return (tl, n, time.perf_counter() - tic, int(warp.get("n_geometry_passes", 0)),
                 int(warp.get("n_emission_passes", 0)))

@@ -6,6 +6,8 @@ Bandwidths follow docs/methods.md: a SPAD pixel reads out 1 bit per binary frame
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +72,8 @@ def describe_recording(path) -> str:
             lines.append(f"  hash        {str(a['recording_hash'])[:16]}")
         if "image_speed_px_s_p50" in a:
             lines.append(f"  motion      {_motion_text(a)}")
+        if "render_noise_relative" in a:
+            lines.append(f"  noise       {_render_noise_text(a)}")
         if rec.has("gt"):
             t = rec.gt.t
             rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
@@ -85,6 +89,16 @@ def describe_recording(path) -> str:
         if not rec.sensors:
             lines.append("    (none)")
     return "\n".join(lines)
+
+
+def _render_noise_text(a) -> str:
+    """The recording's render-noise budget (docs/format.md section 3) in one line."""
+    relative = float(a["render_noise_relative"])
+    fraction = float(a.get("render_noise_spurious_event_fraction", float("nan")))
+    if not math.isfinite(relative):
+        return "render noise not measured (the render has no noise probe)"
+    return (f"render {relative:.1%} per pixel (median error of one keyframe's luminance); drawing that noise anew fires "
+            f"{fraction:.1%} of pixels (a noise-free event sensor at this lux)")
 
 
 def _motion_text(a) -> str:

@@ -65,6 +65,15 @@ def describe_render(summary: RenderSummary) -> str:
         f"{comparison}largest predicted motion between keyframes {summary.max_predicted_flow_px:.3f} px",
         f"variant: {summary.variant}; {per_frame}; total {summary.render_s:.2f} s",
     ]
+    noise = summary.render_noise
+    if noise:
+        cost = ""
+        if summary.probe_s:  # the probe's time against the keyframes' (both wall time in this process)
+            cost = f" (its probe: one more keyframe, {summary.probe_s / max(summary.render_s, 1e-9):.1%} of this render)"
+        lines.append(f"render noise: one keyframe's luminance is off by {noise['relative_noise_median']:.1%} per "
+                     f"pixel (median; RMS {noise['relative_noise_rms']:.1%}); drawing it anew fires "
+                     f"{noise['spurious_event_fraction']:.1%} of pixels in a noise-free event sensor at threshold "
+                     f"{noise['threshold_log']:g} in bright light{cost}")
     if summary.compiled_first_frame >= 0:
         lines.append(f"kernel compilations: {summary.compiled_first_frame} for the first frame, "
                      f"{summary.compiled_after_first} after it")

@@ -50,7 +50,7 @@ from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write
 from simspad.io.recording import open_recording
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
-from simspad.render.mitsuba_env import select_variant
+from simspad.render.mitsuba_env import CUDA_VARIANT, cuda_device_name, select_variant
 from simspad.render.render_plan import chunk_size_for
 from simspad.render.renderer import (
     load_scene,
@@ -157,6 +157,9 @@ class UnitCosts:
     sim_process_rss_bytes: int | None = None  # peak RSS of the probing process (imports, numba, buffers)
     sim_probe_px: tuple[int, int] | None = None  # (width, height) the simulations were probed at
     calibration_s: float = 0.0
+    #: Where renders run: None for CPU cores (render costs per core), else the GPU's name (costs on that GPU)
+    render_gpu: str | None = None
+    render_variant: str = ""
 
 
 def _settings(seq, resolution, duration_s, spp):
@@ -165,13 +168,17 @@ def _settings(seq, resolution, duration_s, spp):
                           max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=1)
 
 
-def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
+def _calibrate_scene(seq, tmp: Path, gpu: str | None = None) -> SceneRenderCost:
     """Time :data:`CALIBRATION_KEYFRAMES` keyframes of ``seq``'s scene along its trajectory at two sample counts
-    (one scene load), one thread."""
+    (one scene load): on one CPU thread, or on the GPU ``gpu`` (its name) when the variant renders there."""
     import drjit as dr  # deferred: heavy; the variant is already set
 
-
-    dr.set_thread_count(1)  # per-core cost: workers render with one thread each
+    on_gpu = gpu is not None
+    if not on_gpu:
+        dr.set_thread_count(1)  # per-core cost: workers render with one thread each
+    # CPU time on the CPU (a busy machine must not inflate the unit cost); wall time on a GPU, which renders while
+    # the calling thread waits (the EXR write reads the image back, so each render has finished when it returns)
+    clock = time.perf_counter if on_gpu else time.process_time
     w = CALIBRATION_WIDTH_PX
     h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
     span_s = min(seq.duration_s, CALIBRATION_SPAN_S)
@@ -187,12 +194,13 @@ def _calibrate_scene(seq, tmp: Path) -> SceneRenderCost:
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
         timed = picks[1:] or picks[:1]
         with _PeakRss() as peak:
-            cpu0 = time.process_time()  # CPU time, not wall: a busy machine must not inflate the unit cost
+            cpu0 = clock()
             render_keyframes(seq.scene, seq.trajectory, plan, timed, out_dir=out / "t", loaded=loaded)
-            points.append((w * h / 1e6 * spp, (time.process_time() - cpu0) / len(timed)))
+            points.append((w * h / 1e6 * spp, (clock() - cpu0) / len(timed)))
         exr.append(np.mean([(out / "t" / plan.names[i]).stat().st_size for i in timed]) / (w * h))
         rss.append(peak.bytes)
-    dr.set_thread_count(default_workers())
+    if not on_gpu:
+        dr.set_thread_count(default_workers())
     (x1, y1), (x2, y2) = points
     b = max((y2 - y1) / (x2 - x1), 0.0)
     a = max(y1 - b * x1, 0.0)
@@ -306,16 +314,18 @@ def measure_unit_costs(spec, log=lambda msg: None) -> UnitCosts:
 
     for key, value in job_environment().items():
         os.environ.setdefault(key, value)
-    select_variant()
+    variant = select_variant()
     t0 = time.perf_counter()
-    costs = UnitCosts()
+    costs = UnitCosts(render_variant=variant, render_gpu=(cuda_device_name() or "CUDA device")
+                      if variant == CUDA_VARIANT else None)
     tmp = Path(tempfile.mkdtemp(prefix="simspad-estimate-"))
     try:
         for seq in spec.sequences:
             name = resolve_scene(seq.scene).name
             if name not in costs.render:
-                log(f"calibrating renders of {name}")
-                costs.render[name] = _calibrate_scene(seq, tmp)
+                where = f" on the GPU ({costs.render_gpu})" if costs.render_gpu else ""
+                log(f"calibrating renders of {name}{where}")
+                costs.render[name] = _calibrate_scene(seq, tmp, costs.render_gpu)
         log("probing simulation throughput")
         _probe_simulation(spec, spec.sequences[0], tmp, costs)
     finally:
@@ -346,18 +356,32 @@ class Estimate:
     plan_s: float
     n_warp_keyframes: int = 0  # keyframes of renders with warp interpolation (costed as if all were rendered)
     n_shared_keyframes: int = 0  # keyframes a faster render shares with a slower one (linked, not counted)
+    n_noise_probes: int = 0  # one extra keyframe render per render (the render-noise budget), in render_cpu_s
+    #: None: renders run on CPU cores (``render_cpu_s`` is CPU-seconds); else the GPU's name (``render_cpu_s`` is
+    #: seconds of that GPU, one render at a time per GPU)
+    render_gpu: str | None = None
 
     @property
     def cpu_s(self) -> float:
         return self.render_cpu_s + self.sim_cpu_s
 
-    def wall_s(self, workers: int) -> float:
+    def wall_s(self, workers: int, gpus: int = 1) -> float:
         """Wall time on ``workers`` single-core workers: renders in chunks of keyframes over all of them (at
-        worst one chunk's time after the last), then the simulations (at best the longest one)."""
+        worst one chunk's time after the last), then the simulations (at best the longest one).
 
-        chunk_tail = max((s * chunk_size_for(n, workers) for s, n in self.keyframe_s), default=0.0)
-        loads = sum(load * math.ceil(n / chunk_size_for(n, workers)) for load, n in self.scene_load_s)
-        render = (self.render_cpu_s + loads) / workers + chunk_tail if self.render_cpu_s else 0.0
+        With renders on a GPU (:attr:`render_gpu`), the renders share ``gpus`` such GPUs instead of the workers
+        (a GPU renders one keyframe at a time, whatever the number of processes feeding it), and the
+        simulations run on the workers' cores."""
+        if self.render_gpu is not None:
+            per_gpu = max(int(gpus), 1)
+            chunk_tail = max((s * chunk_size_for(n, per_gpu) for s, n in self.keyframe_s), default=0.0)
+            loads = sum(load * math.ceil(n / chunk_size_for(n, per_gpu)) for load, n in self.scene_load_s)
+            render = (self.render_cpu_s + loads) / per_gpu + (chunk_tail if per_gpu > 1 else 0.0)
+        else:
+            chunk_tail = max((s * chunk_size_for(n, workers) for s, n in self.keyframe_s), default=0.0)
+            loads = sum(load * math.ceil(n / chunk_size_for(n, workers)) for load, n in self.scene_load_s)
+            render = (self.render_cpu_s + loads) / workers + chunk_tail
+        render = render if self.render_cpu_s else 0.0
         sims = max(self.sim_cpu_s / workers, self.longest_sim_s)
         return render + sims
 
@@ -388,9 +412,9 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         scene_load_s.append((cost.load_s, n))
         if rp.warp is not None:
             n_warp += n
-        render_cpu += per_kf * n
-        largest = max(largest, per_kf * n)
-        renders_bytes += int(cost.exr_bytes_per_px * w * h * n)
+        render_cpu += per_kf * (n + 1)  # and its noise probe: keyframe 0 once more (the render-noise budget)
+        largest = max(largest, per_kf * (n + 1))
+        renders_bytes += int(cost.exr_bytes_per_px * w * h * (n + 1))
         if cost.rss_bytes_per_mp_spp is not None and cost.process_rss_bytes is not None:
             render_rss = max(render_rss or 0.0,
                              cost.process_rss_bytes + cost.rss_bytes_per_mp_spp * w * h / 1e6 * seq.spp)
@@ -427,7 +451,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
                     disk_bytes=int(rec_bytes) + renders_bytes, recordings_bytes=int(rec_bytes),
                     renders_bytes=renders_bytes, peak_render_rss_bytes=render_rss, peak_sim_rss_bytes=sim_rss,
                     cores=default_workers(), plan_s=plan_s, n_warp_keyframes=n_warp,
-                    n_shared_keyframes=n_shared)
+                    n_shared_keyframes=n_shared, n_noise_probes=len(plan.renders), render_gpu=costs.render_gpu)
 
 
 def free_disk_bytes(path) -> int:
@@ -458,7 +482,10 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
     lines = [f"estimate (unit costs measured here in {costs.calibration_s:.0f} s, keyframes planned in "
              f"{est.plan_s:.0f} s):",
              f"  renders      {est.n_renders} sequence(s), {est.n_keyframes} keyframes, "
-             f"{est.render_cpu_s / 3600:.2f} CPU-h",
+             + (f"{est.render_cpu_s / 3600:.2f} GPU-h on {est.render_gpu} ({costs.render_variant}, measured on it)"
+                if est.render_gpu else f"{est.render_cpu_s / 3600:.2f} CPU-h"),
+             *([f"               and {est.n_noise_probes} noise probes (one keyframe per render: the "
+                f"render-noise budget), counted in that time"] if est.n_noise_probes else []),
              *([f"               {est.n_warp_keyframes} of them in warp renders, costed as if each were "
                 f"rendered: an upper bound (how many a warp render renders depends on where its warps agree)"]
                if est.n_warp_keyframes else []),
@@ -466,10 +493,16 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
                 f"ones (the same poses: linked, not rendered)"] if est.n_shared_keyframes else []),
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",
-             f"  total        {est.cpu_s / 3600:.2f} CPU-h",
+             (f"  total        {est.render_cpu_s / 3600:.2f} GPU-h + {est.sim_cpu_s / 3600:.2f} CPU-h"
+              if est.render_gpu else f"  total        {est.cpu_s / 3600:.2f} CPU-h"),
              _here_line(est, workers, hours)]
     for n in cluster_workers:
-        lines.append(f"               {hours(est.wall_s(n))} on {n} workers (one core each, this machine's speed)")
+        if est.render_gpu:
+            lines.append(f"               {hours(est.wall_s(n, gpus=n))} on {n} workers with one {est.render_gpu} "
+                         f"each (one core each for the simulations, this machine's speed)")
+        else:
+            lines.append(f"               {hours(est.wall_s(n))} on {n} workers (one core each, this machine's "
+                         f"speed)")
     disk = f"  disk         {size(est.disk_bytes)} (recordings {size(est.recordings_bytes)}, renders " \
            f"{size(est.renders_bytes)})"
     if free_bytes is not None:
@@ -481,7 +514,7 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
         total = total_memory_bytes()
         lines.append(f"  peak memory  {size(peak)} ({workers} worker(s) × {size(per)})"
                      + (f"; this machine has {size(total)}" if total else ""))
-    lines.append("  unit costs   render s/keyframe (one core): " + ", ".join(
+    lines.append(f"  unit costs   render s/keyframe ({'the GPU' if est.render_gpu else 'one core'}): " + ", ".join(
         f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp (scene load {c.load_s:.1f} s per chunk)"
         for name, c in costs.render.items()))
     sim = [f"{k} {v:.3g} s/" + {"spad": "Gbit", "frames": "MP·frame", "events": "MP·s"}[k]
@@ -495,10 +528,11 @@ def _here_line(est: Estimate, workers: int, hours) -> str:
     """The wall time here: ``workers`` processes share this machine's cores, so more workers than cores run no
     faster than one per core (the estimate's unit costs are one core's)."""
     cores = default_workers()
+    gpu = f", renders on one {est.render_gpu}" if est.render_gpu else ""
     if workers <= cores:
-        return f"  wall time    {hours(est.wall_s(workers))} here ({workers} worker(s))"
+        return f"  wall time    {hours(est.wall_s(workers))} here ({workers} worker(s){gpu})"
     return (f"  wall time    {hours(est.wall_s(cores))} here ({workers} workers asked, but this machine has {cores} "
-            f"core(s): {workers} workers run no faster than {cores})")
+            f"core(s): {workers} workers run no faster than {cores}{gpu})")
 
 
 def disk_needed_bytes(spec, out_dir) -> int:

@@ -195,8 +195,9 @@ def _warp_worker(task, plan: dict, env: dict[str, str], threads: int | None):
 
 
 def run_noise_probe(task, plan: dict, out_dir: str, env: dict[str, str], threads: int | None = None) -> dict[str, Any]:
-    """Render the warp schedule's noise probe of a planned render (:func:`~simspad.render.warp_render.render_noise_probe`:
-    keyframe 0 again with the next seed) into ``<out_dir>/<task.rel_dir>``, unless it is there.
+    """Render the noise probe of a planned render (:func:`~simspad.render.warp_render.render_noise_probe`: keyframe 0
+    again with the next seed; the warp schedule's noise reference and every render's noise budget) into
+    ``<out_dir>/<task.rel_dir>``, unless it is there.
 
     Returns
     -------

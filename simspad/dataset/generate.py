@@ -260,9 +260,11 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                     state.left += _submit_chunks(queue, ex, r, res["plan"], todo_kf)
                     if warp:
                         state.anchors = list(wanted)
-                        state.left += 1
-                        queue.add(Job("chunk", (r, []), lambda r=r, p=res["plan"]: ex.submit_noise_probe(r, p),
-                                      label=f"the noise probe of {r.sequence.name}"))
+                    # Every render gets a noise probe (keyframe 0 again with the next seed): the warps are judged
+                    # against it, and timeline.json and every recording state the render-noise budget from it.
+                    state.left += 1
+                    queue.add(Job("chunk", (r, []), lambda r=r, p=res["plan"]: ex.submit_noise_probe(r, p),
+                                  label=f"the noise probe of {r.sequence.name}"))
                 else:
                     r, c = job.payload
                     state = chunked[r.rel_dir]

@@ -90,7 +90,9 @@ def frame_is_intact(path: Path) -> bool:
 
 
 def remove_stale_frames(out_dir: Path, keep: set[str]) -> None:
-    """Delete frames of earlier renders into the same directory that the new timeline does not reference."""
-    for path in (out_dir / "frames").glob("[0-9][0-9][0-9][0-9][0-9][0-9]-*.exr"):
-        if f"frames/{path.name}" not in keep:
-            path.unlink(missing_ok=True)
+    """Delete frames and noise probes of earlier renders into the same directory that the new timeline does not
+    reference (``keep``: relative paths, ``frames/…``)."""
+    for pattern in ("[0-9][0-9][0-9][0-9][0-9][0-9]-*.exr", "noise-probe-*.exr"):
+        for path in (out_dir / "frames").glob(pattern):
+            if f"frames/{path.name}" not in keep:
+                path.unlink(missing_ok=True)

@@ -21,6 +21,7 @@ from scipy.ndimage import gaussian_filter
 
 from simspad.errors import SimSpadError
 from simspad.render.blocks import block_seed, block_size_px, block_window
+from simspad.render.mitsuba_env import ANSI_ESCAPE
 from simspad.render.schedule import focal_length_px
 from simspad.scenes.library import DEFAULT_CAMERA_ID, scene_dict_or_file
 
@@ -40,10 +41,19 @@ DEPTH_SPP = 1
 
 
 def sampler_for(spp: int) -> str:
-    """Low-discrepancy samples when ``spp`` is a power of four (≈ 4x lower noise than independent ones at 64 spp,
-    and with a fixed seed the pattern stays put as the image moves, so interpolated keyframes track brute-force
-    renders closely); independent samples otherwise (the low-discrepancy sampler would round ``spp`` up)."""
-    return "ldsampler" if spp >= 1 and spp & (spp - 1) == 0 and (spp.bit_length() - 1) % 2 == 0 else "independent"
+    """Low-discrepancy samples when ``spp`` is a power of four from 4 up (≈ 4x lower noise than independent ones at
+    64 spp, and with a fixed seed the pattern stays put as the image moves, so interpolated keyframes track
+    brute-force renders closely); independent samples otherwise, which take any ``spp`` as it is.
+
+    Mitsuba's low-discrepancy sampler rounds a sample count that is not a square power of two up, and takes 1 as 4
+    ("Sample count should be square and power of two, rounding to 4"): 1 spp gets independent samples, so every
+    ``spp`` is rendered as asked (:func:`honoured_spp` checks it on the sensor)."""
+    return "ldsampler" if spp >= 4 and spp & (spp - 1) == 0 and (spp.bit_length() - 1) % 2 == 0 else "independent"
+
+
+def honoured_spp(sensor) -> int:
+    """The sample count the sensor's sampler will actually take (Mitsuba may round the one it was given)."""
+    return int(sensor.sampler().sample_count())
 
 
 
@@ -87,7 +97,7 @@ def mitsuba_error_text(exc: BaseException) -> str:
     """
     parts, seen_context = [], set()
     for line in str(exc).splitlines():
-        line = _MITSUBA_SOURCE_TAG.sub("", line.strip())
+        line = _MITSUBA_SOURCE_TAG.sub("", ANSI_ESCAPE.sub("", line).strip())
         context, sep, rest = line.partition("): ")
         if sep and context.startswith("Error while loading"):
             if context in seen_context:
@@ -133,6 +143,9 @@ class MitsubaScene:
                      "component_format": "float32", "rfilter": dict(RECONSTRUCTION_FILTER)},
             "sampler": {"type": sampler_for(spp), "sample_count": spp},
         })
+        if honoured_spp(self.sensor) != spp:  # the sampler would render another count than the one recorded
+            raise SimSpadError(f"Mitsuba's {sampler_for(spp)} sampler renders {honoured_spp(self.sensor)} samples "
+                               f"per pixel when asked for {spp}", field="spp")
         self.sensor_params = mi.traverse(self.sensor)
         self._block_sensor = None  # made on the first render_radiance_block()
         self._pose = self.rest_camera_to_world

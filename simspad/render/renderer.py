@@ -11,7 +11,8 @@ of everything that determines its pixels, so re-runs re-use frames and an interr
 
 A render is three stages (:mod:`simspad.render.render_plan`): :func:`plan_render` (keyframe instants, poses and
 names), :func:`render_keyframes` (any list of keyframe indices, in any process: ``simspad generate`` spreads
-chunks of them over its workers) and :func:`finalize_render` (``timeline.json``, once every keyframe exists).
+chunks of them over its workers) with :func:`render_probe` (keyframe 0 again with the next seed: the render-noise
+budget's probe), and :func:`finalize_render` (``timeline.json`` with the budget, once every keyframe exists).
 :func:`render_sequence` runs the three in one process.
 
 With ``interpolation = "warp"`` (opt-in, :mod:`simspad.render.settings` says why it is not the default) only
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import os
 import shutil
 import sys
@@ -35,9 +37,12 @@ import numpy as np
 from tqdm import tqdm
 
 from simspad.errors import SimSpadError
-from simspad.io.render_dir import write_timeline_json
+from simspad.io.exr import read_exr
+from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
+from simspad.physics.radiometry import luminance_from_rgb
+from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, render_noise_budget
 from simspad.render.flow import (
     camera_poses,
     max_step_flow,
@@ -66,11 +71,18 @@ from simspad.render.render_plan import RenderPlan
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
-from simspad.render.warp_render import chunk_result, merge_chunk_results, render_with_warps
+from simspad.render.warp_render import (
+    chunk_result,
+    merge_chunk_results,
+    noise_probe_name,
+    render_noise_probe,
+    render_with_warps,
+)
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
-           "load_scene", "plan_render", "render_keyframes", "render_sequence", "select_variant", "with_warp_results"]
+           "load_scene", "plan_render", "render_keyframes", "render_probe", "render_sequence", "select_variant",
+           "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
 RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
@@ -307,6 +319,20 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     return _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
 
 
+def render_probe(scene, trajectory, plan: RenderPlan, *, out_dir, loaded: LoadedScene | None = None) -> bool:
+    """Stage 2b: the render-noise budget's noise probe (keyframe 0 again with the next seed,
+    :func:`~simspad.render.warp_render.render_noise_probe`) into ``out_dir`` unless it is there; in any process, like
+    :func:`render_keyframes` (whose arguments these are). True if it was rendered now."""
+    out_dir = Path(out_dir)
+    if (out_dir / noise_probe_name(plan)).is_file():
+        return False
+    make_out_dir(out_dir)
+    if loaded is None:
+        loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
+    _check_same_inputs(plan, loaded)
+    return render_noise_probe(loaded.ms, loaded.ts, plan, out_dir)
+
+
 def finalize_render(plan: RenderPlan, out_dir) -> Path:
     """Stage 3: write ``timeline.json`` (which marks the render directory complete) once every keyframe file of
     ``plan`` exists, and delete frames of earlier renders into the same directory that it does not reference.
@@ -322,9 +348,26 @@ def finalize_render(plan: RenderPlan, out_dir) -> Path:
         raise SimSpadError(f"{len(missing)} of {plan.n_keyframes} keyframes not rendered yet (first: {missing[0]})",
                            path=out_dir)
     path = write_timeline_json(out_dir, width=plan.width, height=plan.height, keyframes=plan.keyframes(),
-                               **plan.timeline)
-    remove_stale_frames(out_dir, set(plan.names))
+                               **plan.timeline, render_noise=measure_render_noise(plan, out_dir))
+    remove_stale_frames(out_dir, set(plan.names) | {noise_probe_name(plan)})
     return path
+
+
+def measure_render_noise(plan: RenderPlan, out_dir) -> dict | None:
+    """The render-noise budget of a render (``timeline.json``'s ``render_noise``) from keyframe 0's file and its
+    noise probe (:func:`~simspad.render.warp_render.render_noise_probe`: keyframe 0 again with the next seed), or
+    None where the probe was not rendered (a render made before SimSPAD rendered one for every render).
+
+    :func:`simspad.radiance.noise_budget.render_noise_budget` defines the figures; the probe's file and seed are
+    stored with them, so a recording can state its own figure at its lux level."""
+    out_dir = Path(out_dir)
+    probe = noise_probe_name(plan)
+    if not (out_dir / probe).is_file():
+        return None
+    y0 = luminance_from_rgb(read_exr(out_dir / plan.names[0])["rgb"])
+    y1 = luminance_from_rgb(read_exr(out_dir / probe)["rgb"])
+    return {**render_noise_budget(y0, y1), "probe_file": probe, "probe_keyframe": 0,
+            "probe_seed": plan.seed + PROBE_SEED_OFFSET, "probe_renders": 1}
 
 
 def _check_same_inputs(plan: RenderPlan, loaded: LoadedScene) -> None:
@@ -384,12 +427,18 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     except BaseException:
         remove_created(created)
         raise
+    probe_s = None
     if plan.warp is not None:
         done, plan = _render_warped(plan, loaded, out_dir, progress)
     else:
         done = render_keyframes(scene, trajectory, plan, range(plan.n_keyframes), out_dir=out_dir,
                                 progress=progress, loaded=loaded)
+        # The render-noise budget's probe (the warp schedule renders it for its own use): one keyframe more.
+        tic = time.perf_counter()
+        probe_s = time.perf_counter() - tic if render_probe(scene, trajectory, plan, out_dir=out_dir,
+                                                            loaded=loaded) else 0.0
     finalize_render(plan, out_dir)
+    render_noise = json.loads((out_dir / TIMELINE_FILE).read_text()).get("render_noise")
     schedule = plan.timeline["schedule"]
     return RenderSummary(out_dir=out_dir, n_keyframes=plan.n_keyframes, n_rendered=len(done.frame_times_s),
                          n_reused=done.n_reused, duration_s=float(settings.duration_s),
@@ -398,7 +447,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                          compiled_first_frame=done.compiled[0] if done.compiled else -1,
                          compiled_after_first=sum(done.compiled[1:]) if loaded.counter.enabled else -1,
                          max_predicted_flow_px=schedule["max_predicted_flow_px"], spad_bin_s=spad_bin_s,
-                         frame_times_s=done.frame_times_s, n_warped=list(plan.sources).count("warp"))
+                         frame_times_s=done.frame_times_s, n_warped=list(plan.sources).count("warp"),
+                         render_noise=render_noise, probe_s=probe_s if plan.warp is None else None)
 
 
 def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progress: bool):

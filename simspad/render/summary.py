@@ -37,6 +37,11 @@ class RenderSummary:
         Wall time of each rendered keyframe (radiance + depth), seconds.
     n_warped : int
         Keyframes synthesized by reprojection (``interpolation = "warp"``) rather than rendered.
+    render_noise : dict or None
+        The render-noise budget written to ``timeline.json`` (:func:`simspad.render.renderer.measure_render_noise`).
+    probe_s : float or None
+        Wall time of the budget's noise probe (one keyframe render), seconds; 0 when it was re-used, None when the
+        warp schedule rendered it (inside its own timing).
     """
 
     out_dir: Path
@@ -54,6 +59,8 @@ class RenderSummary:
     spad_bin_s: float | None = None
     frame_times_s: list = field(default_factory=list, repr=False)
     n_warped: int = 0
+    render_noise: dict | None = None
+    probe_s: float | None = None
 
     @property
     def time_per_frame_s(self) -> float:

@@ -31,6 +31,7 @@ from scipy.ndimage import gaussian_filter
 from simspad.io.exr import read_exr, write_exr
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
+from simspad.radiance.noise_budget import PROBE_SEED_OFFSET
 from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction, tiles_of_blocks
 from simspad.render.flow import object_poses
 from simspad.render.keyframe_files import frame_key, frame_names, write_frame
@@ -110,6 +111,14 @@ class BlockPatcher:
         return out
 
 
+def _probe_objects(ts: TrajectorySet, plan: RenderPlan) -> dict:
+    """The animated objects' poses at keyframe 0, as the plan has them (a faster render's shared keyframes were
+    planned on the slower trajectory), else from the trajectory."""
+    if plan.objects_to_world:
+        return {k: np.asarray(m) for k, m in plan.objects_to_world[0].items()}
+    return object_poses(ts, plan.times_s[0])
+
+
 def noise_probe_name(plan: RenderPlan) -> str:
     """Relative file of the noise probe: keyframe 0 rendered again with the next seed (not a keyframe)."""
     return f"frames/noise-probe-{frame_key(dict(plan.base_key, noise_probe=1), plan.times_s[0])}.exr"
@@ -117,12 +126,13 @@ def noise_probe_name(plan: RenderPlan) -> str:
 
 def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out_dir: Path) -> bool:
     """Render the noise probe (keyframe 0's radiance with the plan's seed + 1) into ``out_dir`` unless it is
-    there; True if it was rendered now."""
+    there; True if it was rendered now. The warp schedule judges its warps against it, and every render's
+    ``timeline.json`` states its render-noise budget from it (:func:`simspad.render.renderer.measure_render_noise`)."""
     path = out_dir / noise_probe_name(plan)
     if path.is_file():
         return False
-    ms.set_pose(np.asarray(plan.camera_to_world[0]), object_poses(ts, plan.times_s[0]))
-    rgb = ms.render_radiance(plan.seed + 1)
+    ms.set_pose(np.asarray(plan.camera_to_world[0]), _probe_objects(ts, plan))
+    rgb = ms.render_radiance(plan.seed + PROBE_SEED_OFFSET)
     write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
     return True
 
@@ -236,7 +246,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
             if key0_emission is not None:  # the warps move reflected light only: judge them against its noise
                 probe_emission = True
                 key0 = np.maximum(key0 - key0_emission, 0.0)
-                probe = np.maximum(probe - ms.render_emission(seed + 1), 0.0)
+                probe = np.maximum(probe - ms.render_emission(seed + PROBE_SEED_OFFSET), 0.0)
         noise_y, noise = noise_map(key0, probe)
     patcher = BlockPatcher(ms, pose_at, seed, lambda i: (out_dir / warp_names[i]).is_file())
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,

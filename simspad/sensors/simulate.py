@@ -26,6 +26,7 @@ from simspad.radiance.timeline import Timeline
 from simspad.sensors import events, frames, spad
 from simspad.sensors.ground_truth import write_ground_truth
 from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs
+from simspad.sensors.render_noise import render_noise_attrs
 from simspad.sensors.recording_size import check_recording_size
 
 #: Instants this close beyond the render's last keyframe are accepted (round-off of start + duration).
@@ -119,6 +120,7 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
                "frames": lambda w, p, rng: frames.simulate_frames(w, flux_tl, t0, t1, p, rng, progress),
                "events": lambda w, p, rng: events.simulate_events(w, flux_tl, t0, t1, p, rng, lux, progress)}
     attrs = _root_attrs(tl, render_dir, settings, t0=t0, t1=t1, flux_scale=flux_tl.scale, metadata=metadata)
+    attrs.update(render_noise_attrs(flux_tl, render_dir, sensors.get("events")))
     common = {"lux": float(lux), "flux_scale": float(flux_tl.scale),
               **{f"optics_{k}": v for k, v in optics.to_attrs().items()}}
     with RecordingWriter(out_path, attrs) as writer:

@@ -92,6 +92,24 @@ def tiny(tmp_path_factory):
     return root, spec_path, out, res
 
 
+def test_every_render_and_recording_states_its_render_noise_budget(tiny):
+    """Each render of a generated dataset gets its noise probe (a job of its own), its timeline.json the budget, and
+    every recording the budget at its lux (docs/format.md)."""
+    import h5py
+
+    root, spec_path, out, res = tiny
+    m = read_manifest(out)
+    for r in m["renders"]:
+        budget = json.loads((out / r["path"] / "timeline.json").read_text())["render_noise"]
+        assert (out / r["path"] / budget["probe_file"]).is_file()
+        assert 0 < budget["relative_noise_median"] < 1 and 0 <= budget["spurious_event_fraction"] <= 1
+    for e in m["recordings"]:
+        with h5py.File(out / e["path"], "r") as f:
+            assert 0 < f.attrs["render_noise_relative"] < 1
+            assert 0 <= f.attrs["render_noise_spurious_event_fraction"] <= 1
+            assert json.loads(f.attrs["render_noise"])["recording"]["event_sensor"] == "recording"
+
+
 def test_generate_writes_complete_dataset(tiny):
     root, spec_path, out, res = tiny
     m = read_manifest(out)

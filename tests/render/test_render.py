@@ -142,10 +142,10 @@ def test_simspad_render_compares_with_the_spad_preset_bin(tmp_path, capsys):
 
 # ------------------------------------------------------------------------------------------ stages
 def test_stages_in_chunks_give_the_bytes_of_one_render(tmp_path):
-    """plan → keyframes in two interleaved chunks, each in its own scene load (as two workers) → finalize: every
-    file byte-identical to render_sequence's; finalizing with a keyframe missing is refused."""
+    """plan → keyframes in two interleaved chunks, each in its own scene load (as two workers) → the noise probe →
+    finalize: every file byte-identical to render_sequence's; finalizing with a keyframe missing is refused."""
     from simspad.render.render_plan import RenderPlan
-    from simspad.render.renderer import finalize_render, plan_render, render_keyframes
+    from simspad.render.renderer import finalize_render, plan_render, render_keyframes, render_probe
 
     folder = _textured_folder(tmp_path / "tex")
     settings = RenderSettings(duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=100.0)
@@ -159,7 +159,10 @@ def test_stages_in_chunks_give_the_bytes_of_one_render(tmp_path):
     done = render_keyframes(folder, _pan(), plan, range(plan.n_keyframes - 1, -1, -1), out_dir=out)
     assert (len(done.frame_times_s), done.n_reused) == (plan.n_keyframes - plan.n_keyframes // 2,
                                                         plan.n_keyframes // 2)
+    assert render_probe(folder, _pan(), plan, out_dir=out)  # the render-noise budget's probe, as a stage of its own
+    assert not render_probe(folder, _pan(), plan, out_dir=out)  # there already
     finalize_render(plan, out)
+    assert json.loads((out / "timeline.json").read_text())["render_noise"]["relative_noise_median"] > 0
     files = sorted(p.relative_to(tmp_path / "whole") for p in (tmp_path / "whole").rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file())
     for rel in files:
@@ -173,7 +176,7 @@ def test_cache_reuse_resume_and_invalidation(tmp_path):
     kwargs = dict(out_dir=tmp_path / "r", progress=False)
     first = render_sequence(folder, _pan(), settings, **kwargs)
     doc = (tmp_path / "r" / "timeline.json").read_text()
-    frames = sorted((tmp_path / "r" / "frames").iterdir())
+    frames = sorted(p for p in (tmp_path / "r" / "frames").iterdir() if not p.name.startswith("noise-probe-"))
     reference = Timeline.open(tmp_path / "r").rgb_keyframe(2)
 
     again = render_sequence(folder, _pan(), settings, **kwargs)
@@ -191,7 +194,8 @@ def test_cache_reuse_resume_and_invalidation(tmp_path):
     # Another setting: everything is rendered anew and the old frames are removed.
     other = render_sequence(folder, _pan(), replace(settings, spp=3), **kwargs)
     assert other.n_reused == 0
-    assert len(list((tmp_path / "r" / "frames").iterdir())) == other.n_keyframes
+    assert len(list((tmp_path / "r" / "frames").iterdir())) == other.n_keyframes + 1  # and its noise probe
+    assert len(list((tmp_path / "r" / "frames").glob("noise-probe-*.exr"))) == 1  # the old one is gone
     assert not list((tmp_path / "r").glob(".*tmp*")) and not list((tmp_path / "r" / "frames").glob(".*"))
 
 

@@ -146,11 +146,19 @@ def mesh(name: str, vertices: np.ndarray, faces: np.ndarray, bsdf: dict, uv: np.
     m = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=smooth_normals,
                 has_vertex_texcoords=uv is not None)
     params = mi.traverse(m)
-    params["vertex_positions"] = mi.Float(v.ravel())
-    params["faces"] = mi.UInt32(f.ravel())
+    # Each buffer takes its own type: mi.Float/mi.UInt32 in the JIT variants, but in scalar_rgb those are Python
+    # scalars and a mesh buffer is a dynamic array (drjit.scalar.ArrayXf / ArrayXu).
+    params["vertex_positions"] = _buffer(params, "vertex_positions", v.ravel())
+    params["faces"] = _buffer(params, "faces", f.ravel())
     if uv is not None:
-        params["vertex_texcoords"] = mi.Float(np.ascontiguousarray(uv, dtype=np.float32).ravel())
+        params["vertex_texcoords"] = _buffer(params, "vertex_texcoords",
+                                             np.ascontiguousarray(uv, dtype=np.float32).ravel())
     params.update()
     if smooth_normals:
         m.recompute_vertex_normals()
     return m
+
+
+def _buffer(params, key: str, values: np.ndarray):
+    """``values`` (1-D numpy) as the array type of the mesh parameter ``key`` in the current variant."""
+    return type(params[key])(values)
