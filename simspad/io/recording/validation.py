@@ -375,22 +375,25 @@ class _Check:
         self.fail(f"/{name}", f"{where}: {what}{shown}")
 
     def _instants(self, name: str, lo: float, hi: float, *, strict: bool = True, hi_open: bool = False) -> None:
-        """A 1-D float64 dataset of instants (s): finite, (strictly) increasing, within ``[lo, hi]``."""
+        """A 1-D float64 dataset of instants (s): finite, (strictly) increasing, within ``[lo, hi]`` (``[lo, hi)``
+        with ``hi_open``); the earliest violation is reported."""
         prev = -math.inf
         for i, t in self._blocks(name):
-            if not np.isfinite(t).all():
-                self._first_bad(name, i, ~np.isfinite(t), "not a finite time", t)
             before = np.concatenate(([prev], t[:-1]))
-            order_bad = t <= before if strict else t < before
-            if order_bad.any():
-                self._first_bad(name, i, order_bad, "not after the previous instant" if strict
-                                else "earlier than the previous instant", t)
-            out = (t < lo - SPAN_TOL_S) | ((t >= hi + SPAN_TOL_S) if hi_open else (t > hi + SPAN_TOL_S))
-            if out.any():
-                self._first_bad(name, i, out, f"outside the recorded span {lo!r} … {hi!r} s", t)
+            with np.errstate(invalid="ignore"):
+                checks = [(~np.isfinite(t), "not a finite time"),
+                          (t <= before if strict else t < before,
+                           "not after the previous instant" if strict else "earlier than the previous instant"),
+                          ((t < lo - SPAN_TOL_S) | ((t >= hi + SPAN_TOL_S) if hi_open else (t > hi + SPAN_TOL_S)),
+                           f"outside the recorded span {lo!r} … {hi!r} s")]
+            firsts = [(int(np.argmax(bad)), what) for bad, what in checks if bad.any()]
+            if firsts:
+                k, what = min(firsts, key=lambda f: f[0])
+                self.fail(f"/{name}", f"index {i + k}: {what} (found {t[k].item()!r})")
             prev = float(t[-1]) if t.size else prev
 
-    def _image_values(self, name: str, label: str, expected: str, bad_fn, unit: str = "frame") -> None:
+    def _image_values(self, name: str, label: str, expected: str, bad_fn, unit: str = "frame",
+                      cell: str = "pixel") -> None:
         """Every element of dataset ``name`` passes (``bad_fn`` marks the bad ones), read in blocks; else one line
         naming the first bad value, its pixel and its ``unit`` index."""
         for i, block in self._blocks(name):
@@ -398,7 +401,7 @@ class _Check:
             if bad.any():
                 k = tuple(int(v) for v in np.argwhere(bad)[0])
                 if len(k) == 3:
-                    where = f"at pixel (row {k[1]}, col {k[2]}) of {unit} {i + k[0]}"
+                    where = f"at {cell} (row {k[1]}, col {k[2]}) of {unit} {i + k[0]}"
                 else:
                     where = f"at pixel (row {k[0]}, col {k[1]})"
                 self.fail(f"/{name}", f"{label} {block[k].item()!r} {where} (expected {expected})")
@@ -416,7 +419,7 @@ class _Check:
         if "poses" in h5:
             self._instants("poses/t", -math.inf, math.inf)
             self._image_values("poses/camera_to_world", "matrix entry", "finite values", lambda b: ~np.isfinite(b),
-                               unit="pose")
+                               unit="pose", cell="entry")
         if "spad" in h5:
             self._instants("spad/t_start", t0, t1, hi_open=True)
             if not np.all(np.isfinite(dcr := self.h5["spad/dcr_cps"][()]) & (dcr >= 0)):
