@@ -451,7 +451,7 @@ def submission_mutations() -> list[Mutation]:
         (f"/{KEY}/flux", member("flux", lambda d, r: np.full(d.shape, np.inf, np.float32))),
         (f"/{KEY}/extra", lambda h5, rng: h5[KEY].create_dataset("extra", data=np.zeros(2))),
         ("/loose", lambda h5, rng: h5.create_dataset("loose", data=np.zeros(2))),
-        (KEY, lambda h5, rng: h5.move(KEY, "other_1lx")),
+        ("/other_1lx", lambda h5, rng: h5.move(KEY, "other_1lx")),
         (f"/{KEY}/flux", lambda h5, rng: (h5[KEY].__delitem__("flux"),
                                            h5[KEY].__setitem__("flux", h5py.SoftLink(f"/{KEY}/t")))),
         (None, lambda h5, rng: h5.attrs.__setitem__("note", "an extra attribute")),
