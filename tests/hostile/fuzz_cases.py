@@ -428,6 +428,16 @@ def submission_mutations() -> list[Mutation]:
         d.reshape(-1)[int(rng.integers(0, d.size))] = np.nan
         return d
 
+    def corrupt_flux(h5, rng):
+        data = h5[f"{KEY}/flux"][()]
+        del h5[f"{KEY}/flux"]
+        ds = h5[KEY].create_dataset("flux", data=data, chunks=(1, *data.shape[1:]), compression="gzip")
+        info = ds.id.get_chunk_info(0)
+        h5.flush()
+        with open(h5.filename, "r+b") as raw:
+            raw.seek(info.byte_offset)
+            raw.write(b"\xff" * min(16, info.size))
+
     cases = [
         ("/.method", lambda h5, rng: h5.attrs.__delitem__("method")),
         ("/.absolute_scale", attr("absolute_scale", "maybe")),
@@ -454,6 +464,7 @@ def submission_mutations() -> list[Mutation]:
         ("/other_1lx", lambda h5, rng: h5.move(KEY, "other_1lx")),
         (f"/{KEY}/flux", lambda h5, rng: (h5[KEY].__delitem__("flux"),
                                            h5[KEY].__setitem__("flux", h5py.SoftLink(f"/{KEY}/t")))),
+        (f"/{KEY}/flux", corrupt_flux),
         (None, lambda h5, rng: h5.attrs.__setitem__("note", "an extra attribute")),
     ]
     return [Mutation("submission", i, field, None, apply) for i, (field, apply) in enumerate(cases)]
