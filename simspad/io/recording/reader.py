@@ -42,15 +42,18 @@ class Recording:
         ``/events``: ``attrs``, ``n_events``, ``ms_to_idx``, ``window(t0_s, t1_s)``, ``iter_chunks``, …
     """
 
-    def __init__(self, path: Path, h5: h5py.File):
+    def __init__(self, path: Path, h5: h5py.File, attrs: dict[str, dict] | None = None):
         self.path = path
         self.h5 = h5
-        self.attrs = {k: decode_attr(v) for k, v in h5.attrs.items()}
+        attrs = attrs or {}
+        self.attrs = attrs["/"] if "/" in attrs else {k: decode_attr(v) for k, v in h5.attrs.items()}
         self.gt = GroundTruthView(h5, path, "gt")
         self.poses = PosesView(h5, path, "poses")
         self.spad = SpadView(h5, path, self.width, self.height)
         self.frames = FramesView(h5, path, "frames")
         self.events = EventsView(h5, path)
+        for view in (self.gt, self.poses, self.spad, self.frames, self.events):
+            view._attrs = attrs.get(view._name)  # read by the validation already (None: read when asked)
 
     def __enter__(self) -> "Recording":
         return self
@@ -121,15 +124,16 @@ def open_recording(path: str | Path) -> Recording:
     h5 = open_checked(path, kind="recording", format=FORMAT, format_version=FORMAT_VERSION)
     try:
         key = _file_identity(path)
+        attrs = None
         if key not in _VALIDATED:
-            validate_recording(h5, path)
+            attrs = validate_recording(h5, path)
             if len(_VALIDATED) >= _VALIDATED_MAX:
                 _VALIDATED.clear()
             _VALIDATED.add(key)
+        return Recording(path, h5, attrs)
     except BaseException:
         h5.close()
         raise
-    return Recording(path, h5)
 
 
 #: Identities of the files validated in this process (see :func:`open_recording`); forked workers inherit it.

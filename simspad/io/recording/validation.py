@@ -103,8 +103,14 @@ def limits_lifted() -> bool:
     return os.environ.get("SIMSPAD_IGNORE_LIMITS", "") == "1"
 
 
-def validate_recording(h5: h5py.File, path: Path) -> None:
+def validate_recording(h5: h5py.File, path: Path) -> dict[str, dict]:
     """Check the open recording ``h5`` (file ``path``) against docs/format.md: structure, then values.
+
+    Returns
+    -------
+    dict
+        The attributes read on the way, decoded as :func:`~simspad.io.hdf5.decode_attr` does: ``"/"`` for the
+        root's, then one dict per group present (the reader takes them instead of reading them again).
 
     Raises
     ------
@@ -114,6 +120,7 @@ def validate_recording(h5: h5py.File, path: Path) -> None:
     check = _Check(h5, Path(path))
     check.structure()
     check.values()
+    return check.raw
 
 
 class _Check:
@@ -124,6 +131,7 @@ class _Check:
         self.path = path
         self.attrs: dict = {}
         self.group_attrs: dict[str, dict] = {}
+        self.raw: dict[str, dict] = {}  # every attribute as decoded, before the checks convert the known ones
 
     def fail(self, field: str, message: str):
         raise InputError(message, path=self.path, field=field)
@@ -164,6 +172,7 @@ class _Check:
         """Every attribute of ``obj`` decoded (InputError for an unreadable one), the ``table`` ones checked, the
         ``required`` ones present."""
         out = {}
+        self.raw[prefix.strip("/.") or "/"] = out
         try:
             names = list(obj.attrs.keys())
         except Exception:  # noqa: BLE001 - any failure of the library to list them is a damaged file
@@ -176,10 +185,11 @@ class _Check:
         for name in required:
             if name not in out:
                 self.fail(f"{prefix}{name}", "required attribute missing")
+        checked = dict(out)
         for name, kind in table.items():
-            if name in out:
-                out[name] = self._attr_value(f"{prefix}{name}", out[name], kind)
-        return out
+            if name in checked:
+                checked[name] = self._attr_value(f"{prefix}{name}", checked[name], kind)
+        return checked
 
     def _attr_value(self, field: str, value, kind: str):
         """The attribute ``value`` checked against ``kind``, as a plain Python value."""
