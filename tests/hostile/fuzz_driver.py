@@ -3,7 +3,7 @@
 JOBS.json lists jobs ``{"name", "argv"}``; each is run through ``simspad.cli.main(argv)``, the command line's own
 entry point, in this one process (a process per command would cost ≈ 1.5 s of imports each). Before the jobs, the
 methods run once on the valid base recording, so that the evaluation workers forked later start with the numba
-kernels loaded. Each job's exit status and stderr go to OUT.json as it finishes; the name of the job about to run
+kernels loaded (tqdm's monitor thread is kept off: with a second thread running, evaluate spawns its workers). Each job's exit status and stderr go to OUT.json as it finishes; the name of the job about to run
 is printed first, so a signal that kills the process (a crash in native code) names the job that caused it.
 """
 
@@ -13,6 +13,7 @@ import contextlib
 import io
 import json
 import sys
+import time
 import traceback
 from pathlib import Path
 
@@ -34,6 +35,12 @@ def run(argv: list[str]) -> tuple[object, str]:
 
 
 def main(jobs_path: str, out_path: str, warm: str | None = None) -> int:
+    import tqdm  # deferred: only to keep its monitor thread from starting
+
+    # evaluate forks its workers only while this process runs no other thread (else it spawns them, and each
+    # spawned worker imports everything again); tqdm's monitor thread, started by the first progress bar and
+    # kept for the process's life, would make every evaluation after the first spawn.
+    tqdm.tqdm.monitor_interval = 0
     jobs = json.loads(Path(jobs_path).read_text())
     if warm:
         from simspad.evaluate.evaluate import evaluate  # deferred: warm-up only
@@ -42,8 +49,10 @@ def main(jobs_path: str, out_path: str, warm: str | None = None) -> int:
     results = []
     for job in jobs:
         print("RUN", job["name"], *job["argv"], flush=True)
+        start = time.perf_counter()
         rc, err = run(job["argv"])
-        results.append({"name": job["name"], "argv": job["argv"], "rc": rc, "stderr": err})
+        results.append({"name": job["name"], "argv": job["argv"], "rc": rc, "stderr": err,
+                        "seconds": time.perf_counter() - start})
     Path(out_path).write_text(json.dumps(results))
     return 0
 
