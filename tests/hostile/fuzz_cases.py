@@ -27,7 +27,7 @@ LUX = 100.0
 SEQUENCE = "rd"
 KEY = f"{SEQUENCE}_{LUX:g}lx"
 REC_REL = f"recordings/{SEQUENCE}/{KEY}.h5"
-#: Seeds (variants) per mutation kind: 51 kinds × 5 = 255 recording mutations.
+#: Seeds (variants) per mutation kind: 52 kinds × 5 = 260 recording mutations.
 SEEDS_PER_KIND = 5
 
 
@@ -313,6 +313,18 @@ def _kinds(n_events: int, n_gt: int, n_bins: int) -> dict[str, Callable[[int], t
                 h5[name] = h5py.ExternalLink("/etc/passwd", "/x")
         return (f"/{name}", None, apply)
 
+    def not_stored(seed):
+        # a dataset declared huge in a tiny file: its chunks are never written (they would read as zeros)
+        name, shape, chunks = pick(seed, [("events/t", (1 << 40,), (1 << 16,)), ("events/x", (10**12,), (4096,)),
+                                          ("gt/flux", (10**7, H, W), (16, H, W)),
+                                          ("spad/bits", (10**8, H, 2), None), ("spad/t_start", (10**9,), None)])
+
+        def apply(h5, rng):
+            dtype = h5[name].dtype
+            del h5[name]
+            h5.create_dataset(name, shape=shape, dtype=dtype, chunks=chunks)
+        return (f"/{name}", None, apply)
+
     # Valid controls: what a well-formed file may hold; validation must accept them.
     def valid(seed):
         options = [
@@ -395,6 +407,7 @@ def _kinds(n_events: int, n_gt: int, n_bins: int) -> dict[str, Callable[[int], t
         "link_instead_of_dataset": link,
         "poses_not_finite": poses_bad,
         "bytes_overwritten": bytes_flip,
+        "dataset_declared_not_stored": not_stored,
         "valid_control": valid,
     }
 

@@ -292,7 +292,24 @@ class _Check:
                                   "(little-endian, docs/format.md)")
         if ds.ndim != rank:
             self.fail(f"/{name}", f"shape {ds.shape}, expected {rank} dimensions")
+        self._stored(ds, name)
         return ds
+
+    def _stored(self, ds: h5py.Dataset, name: str) -> None:
+        """Every byte of the dataset is in the file: HDF5 lets a small file declare a huge dataset whose missing
+        chunks read as zeros, which would take hours to stream (SimSPAD's writers store every chunk)."""
+        if ds.size == 0:
+            return
+        try:
+            if ds.chunks is None:
+                missing = ds.id.get_storage_size() < ds.size * ds.dtype.itemsize
+            else:
+                needed = int(np.prod([-(-n // c) for n, c in zip(ds.shape, ds.chunks)], dtype=np.int64))
+                missing = ds.id.get_num_chunks() < needed
+        except Exception:  # noqa: BLE001 - the library cannot describe its storage: a damaged file
+            self.fail(f"/{name}", "storage unreadable")
+        if missing:
+            self.fail(f"/{name}", f"shape {ds.shape} declared but not all of its data is stored in the file")
 
     def _shapes(self) -> None:
         H, W = self.height, self.width
