@@ -4,8 +4,8 @@
 
 For the recording: the CPU and wall time of one full validation (:func:`simspad.io.recording.validation.
 validate_recording`: structure and every value, streamed; median of ``--rounds``), the peak of memory it allocates
-(tracemalloc), then the evaluation of every method the recording allows in one child process (``workers=1``: its CPU time
-is all of it), and how many times the evaluation validated the file (it opens it once per job; a file
+(tracemalloc), then the evaluation of every method the recording allows in one child process (``workers=1``:
+its CPU time is all of it), and how many times the evaluation validated the file (it opens it once per job; a file
 validated before in the process is not read again, and forked workers inherit that).
 """
 

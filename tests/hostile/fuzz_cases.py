@@ -27,7 +27,7 @@ LUX = 100.0
 SEQUENCE = "rd"
 KEY = f"{SEQUENCE}_{LUX:g}lx"
 REC_REL = f"recordings/{SEQUENCE}/{KEY}.h5"
-#: Seeds (variants) per mutation kind: 52 kinds × 5 = 260 recording mutations.
+#: Seeds (variants) per mutation kind: 53 kinds × 5 = 265 recording mutations.
 SEEDS_PER_KIND = 5
 
 
@@ -232,6 +232,12 @@ def _kinds(n_events: int, n_gt: int, n_bins: int) -> dict[str, Callable[[int], t
         k = {0.0: n_bins - 1}.get(v, int(np.random.default_rng(seed).integers(1, n_bins)))
         return ("/spad/t_start", f"index {k}", _set_item("spad/t_start", lambda d, r: k, lambda d, r: v))
 
+    def spad_overlap(seed):
+        # a bin starting inside the previous one (still increasing): bins are [t_start, t_start + bin_s)
+        k = 1 + int(np.random.default_rng([seed, 17]).integers(0, n_bins - 1))
+        step = pick(seed, [1e-6, 5e-6, 1e-5, 1e-9, 2e-6])
+        return ("/spad/t_start", f"index {k}", _set_item("spad/t_start", lambda d, r: k, lambda d, r: d[k - 1] + step))
+
     def spad_padding(seed):
         rng = np.random.default_rng([seed, 3])
         m, r = int(rng.integers(0, n_bins)), int(rng.integers(0, H))
@@ -363,15 +369,16 @@ def _kinds(n_events: int, n_gt: int, n_bins: int) -> dict[str, Callable[[int], t
         "gt_t_dtype": dtype_of("gt/t", ["float32", "int64", ">f8", "float16", "uint8"]),
         # SPAD
         "spad_bits_dtype": dtype_of("spad/bits", ["float64", "uint16", "bool", "int8", "float32"]),
-        "spad_bits_shape": lambda s: (r"/spad/(bits|t_start)",) + shape_of("spad/bits", [lambda d: d[:, :, :1], lambda d: d[:, :-1],
-                                                  lambda d: np.concatenate([d, d[:, :, :1]], axis=2),
-                                                  lambda d: d[:-1], lambda d: d[:, :, 0]])(s)[1:],
+        "spad_bits_shape": lambda s: (r"/spad/(bits|t_start)",) + shape_of("spad/bits", [
+            lambda d: d[:, :, :1], lambda d: d[:, :-1], lambda d: np.concatenate([d, d[:, :, :1]], axis=2),
+            lambda d: d[:-1], lambda d: d[:, :, 0]])(s)[1:],
         "spad_padding_bits": spad_padding,
         "spad_t_start_bad": spad_t_bad,
         "spad_dcr_bad": dcr_bad,
         "spad_attr_bad": lambda s: attr("spad", pick(s, ["bin_s", "gate_s", "qe", "fill_factor", "pixel_pitch_m"]),
                                         [0.0, -1.0, np.nan, "abc", np.array([1.0, 2.0])])(s),
         "spad_gate_longer_than_bin": attr("spad", "gate_s", [1.0, 2e-5, 1e-3, 0.5, 3e-5]),
+        "spad_bins_overlap": spad_overlap,
         # frames
         "frames_dn_over_adc": frames_dn,
         "frames_dn_dtype": dtype_of("frames/dn", ["float32", "int32", "uint8", ">u2", "int64"]),

@@ -3,8 +3,9 @@
 JOBS.json lists jobs ``{"name", "argv"}``; each is run through ``simspad.cli.main(argv)``, the command line's own
 entry point, in this one process (a process per command would cost ≈ 1.5 s of imports each). Before the jobs, the
 methods run once on the valid base recording, so that the evaluation workers forked later start with the numba
-kernels loaded (tqdm's monitor thread is kept off: with a second thread running, evaluate spawns its workers). Each job's exit status and stderr go to OUT.json as it finishes; the name of the job about to run
-is printed first, so a signal that kills the process (a crash in native code) names the job that caused it.
+kernels loaded (tqdm's monitor thread is kept off: with a second thread running, evaluate spawns its workers).
+Each job's exit status, stderr and seconds go to OUT.json; the name of the job about to run is printed first, so
+a signal that kills the process (a crash in native code) names the job that caused it.
 """
 
 from __future__ import annotations

@@ -58,8 +58,8 @@ DATASETS = {
 REQUIRED = {**REQUIRED_DATASETS, "poses": ("poses/t", "poses/camera_to_world")}
 
 # Attribute kinds: "pos" finite > 0, "nonneg" finite ≥ 0, "float" finite, "nonneg_or_nan" ≥ 0 or NaN (not measured),
-# "unit" in (0, 1], "prob" in [0, 1], "int" integer, "count" integer ≥ 0, "posint" integer ≥ 1, "str" text, "json" JSON text,
-# "json_object" JSON object text, "bool" true/false (or 0/1, "true"/"false").
+# "unit" in (0, 1], "count" integer ≥ 0, "posint" integer ≥ 1, "str" text, "json" JSON text, "json_object" JSON
+# object text, "bool" true/false (or 0/1, "true"/"false").
 #: Root attributes: name → kind (the required ones: :data:`.layout.REQUIRED_ROOT_ATTRS`).
 ROOT_ATTRS = {
     "width": "posint", "height": "posint", "duration_s": "pos", "lux": "pos",
@@ -93,8 +93,8 @@ GROUP_ATTRS = {
                "timestamp_unit": "str"},
 }
 _EXPECT = {"pos": "a finite number > 0", "nonneg": "a finite number ≥ 0", "float": "a finite number",
-           "nonneg_or_nan": "a number ≥ 0 (or NaN)", "unit": "a number in (0, 1]", "prob": "a number in [0, 1]",
-           "count": "an integer ≥ 0", "posint": "a positive integer", "int": "an integer", "str": "a string", "json": "JSON text",
+           "nonneg_or_nan": "a number ≥ 0 (or NaN)", "unit": "a number in (0, 1]", "count": "an integer ≥ 0",
+           "posint": "a positive integer", "str": "a string", "json": "JSON text",
            "json_object": "a JSON object (text)", "bool": "a boolean"}
 
 
@@ -214,7 +214,7 @@ class _Check:
             self.fail(field, f"expected {_EXPECT[kind]}, got {shown!r}")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(field, f"expected {_EXPECT[kind]}, got {shown!r}")
-        if kind in ("count", "posint", "int"):
+        if kind in ("count", "posint"):
             if isinstance(value, float):
                 if not (math.isfinite(value) and value.is_integer()):
                     self.fail(field, f"expected {_EXPECT[kind]}, got {shown!r}")
@@ -223,8 +223,7 @@ class _Check:
                 self.fail(field, f"expected {_EXPECT[kind]}, got {shown!r}")
             return value
         value = float(value)
-        ok = {"pos": value > 0, "nonneg": value >= 0, "float": True, "unit": 0 < value <= 1,
-              "prob": 0 <= value <= 1}.get(kind)
+        ok = {"pos": value > 0, "nonneg": value >= 0, "float": True, "unit": 0 < value <= 1}.get(kind)
         if kind == "nonneg_or_nan":
             ok = math.isnan(value) or (math.isfinite(value) and value >= 0)
         elif not math.isfinite(value):
@@ -354,6 +353,8 @@ class _Check:
         h5, g = self.h5, self.group_attrs
         if "spad" in g:
             a = g["spad"]
+            if a["bin_s"] < defaults.MIN_SPAD_BIN_S:
+                self.fail("/spad.bin_s", f"{a['bin_s']!r} s, shorter than {defaults.MIN_SPAD_BIN_S:g} s")
             if a["gate_s"] > a["bin_s"] * (1 + 1e-9):
                 self.fail("/spad.gate_s", f"{a['gate_s']!r} s, longer than bin_s = {a['bin_s']!r} s")
             if "n_bins" in a and a["n_bins"] != h5["spad/bits"].shape[0]:
@@ -449,6 +450,15 @@ class _Check:
                                unit="pose", cell="entry")
         if "spad" in h5:
             self._instants("spad/t_start", t0, t1, hi_open=True)
+            bin_s = self.group_attrs["spad"]["bin_s"]
+            prev = -math.inf
+            for i, t in self._blocks("spad/t_start"):  # bins do not overlap: [t_start, t_start + bin_s)
+                close = np.diff(np.concatenate(([prev], t))) < bin_s * (1 - 1e-6)
+                if close.any():
+                    k = int(np.argmax(close))
+                    self.fail("/spad/t_start", f"index {i + k}: {t[k].item()!r} s starts less than bin_s = "
+                                               f"{bin_s!r} s after the previous bin")
+                prev = float(t[-1])
             if not np.all(np.isfinite(dcr := self.h5["spad/dcr_cps"][()]) & (dcr >= 0)):
                 k = tuple(int(v) for v in np.argwhere(~(np.isfinite(dcr) & (dcr >= 0)))[0])
                 self.fail("/spad/dcr_cps", f"dark count rate {dcr[k].item()!r} at pixel (row {k[0]}, col {k[1]}) "
