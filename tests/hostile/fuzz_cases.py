@@ -146,7 +146,8 @@ def _kinds(n_events: int, n_gt: int, n_bins: int) -> dict[str, Callable[[int], t
         def make(seed):
             dt = np.dtype(pick(seed, dtypes))
             def apply(h5, rng):
-                _replace(h5, name, h5[name][()].astype(dt))
+                with np.errstate(all="ignore"):  # the cast may overflow (float16, uint8): the mutation wants it
+                    _replace(h5, name, h5[name][()].astype(dt))
             return (f"/{name}", None, apply)
         return make
 
