@@ -1,7 +1,8 @@
 """Reading a recording (docs/format.md): :func:`open_recording` validates the file, :class:`Recording` reads it.
 
-:func:`open_recording` refuses missing, corrupt or foreign files with one clear message naming the file and the
-field. Methods read recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``,
+:func:`open_recording` refuses missing, corrupt or foreign files, and any file that breaks docs/format.md in its
+structure or in one of its values (:mod:`.validation`), with one clear message naming the file, the field and the
+first bad index; a file validated before in the process and unchanged since is not read again. Methods read recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``,
 ``rec.spad``, ``rec.frames``, ``rec.events``), so they run unchanged on real captures converted to this layout.
 """
 
