@@ -393,25 +393,20 @@ class _Check:
                 self.fail(f"/{name}", f"rows {i}…{min(i + step, n) - 1} unreadable ({str(exc)[:100]})")
             yield i, block
 
-    def _first_bad(self, name: str, i0: int, bad: np.ndarray, what: str, values: np.ndarray | None = None,
-                   unit: str = "index"):
-        """Fail at the first True of ``bad`` (rows from ``i0``), naming the ``unit`` and index and, when given,
-        the value."""
-        k = np.argwhere(bad)[0]
-        where = f"{unit} {i0 + int(k[0])}" + (f", pixel (row {int(k[1])}, col {int(k[2])})" if k.size == 3 else "")
-        shown = "" if values is None else f" (found {values[tuple(k)].item()!r})"
-        self.fail(f"/{name}", f"{where}: {what}{shown}")
+    def _first_bad(self, name: str, i0: int, bad: np.ndarray, what: str, values: np.ndarray, unit: str) -> None:
+        """Fail at the first True of the 1-D ``bad`` (rows from ``i0``), naming the ``unit``, its index and value."""
+        k = int(np.argmax(bad))
+        self.fail(f"/{name}", f"{unit} {i0 + k}: {what} (found {values[k].item()!r})")
 
-    def _instants(self, name: str, lo: float, hi: float, *, strict: bool = True, hi_open: bool = False) -> None:
-        """A 1-D float64 dataset of instants (s): finite, (strictly) increasing, within ``[lo, hi]`` (``[lo, hi)``
-        with ``hi_open``); the earliest violation is reported."""
+    def _instants(self, name: str, lo: float, hi: float, *, hi_open: bool = False) -> None:
+        """A 1-D float64 dataset of instants (s): finite, strictly increasing, within ``[lo, hi]`` (``[lo, hi)``
+        with ``hi_open``; both within :data:`SPAN_TOL_S`); the earliest violation is reported."""
         prev = -math.inf
         for i, t in self._blocks(name):
             before = np.concatenate(([prev], t[:-1]))
             with np.errstate(invalid="ignore"):
                 checks = [(~np.isfinite(t), "not a finite time"),
-                          (t <= before if strict else t < before,
-                           "not after the previous instant" if strict else "earlier than the previous instant"),
+                          (t <= before, "not after the previous instant"),
                           ((t < lo - SPAN_TOL_S) | ((t >= hi + SPAN_TOL_S) if hi_open else (t > hi + SPAN_TOL_S)),
                            f"outside the recorded span {lo!r} … {hi!r} s")]
             firsts = [(int(np.argmax(bad)), what) for bad, what in checks if bad.any()]
@@ -478,7 +473,7 @@ class _Check:
             for (i, ts), (_, te) in zip(self._blocks("frames/t_start", EVENT_STEP),
                                         self._blocks("frames/t_end", EVENT_STEP)):
                 if (te <= ts).any():
-                    self._first_bad("frames/t_end", i, te <= ts, "exposure ends before it starts", te)
+                    self._first_bad("frames/t_end", i, te <= ts, "exposure ends before it starts", te, "index")
             dn_max = (1 << a["bit_depth"]) - 1
             self._image_values("frames/dn", "DN", f"≤ 2^bit_depth − 1 = {dn_max}", lambda b: b > dn_max)
         if "events" in h5:
