@@ -132,6 +132,7 @@ class _Check:
         self.attrs: dict = {}
         self.group_attrs: dict[str, dict] = {}
         self.raw: dict[str, dict] = {}  # every attribute as decoded, before the checks convert the known ones
+        self.ds: dict[str, h5py.Dataset] = {}  # the format's datasets present, looked up once (a lookup costs)
 
     def fail(self, field: str, message: str):
         raise InputError(message, path=self.path, field=field)
@@ -292,6 +293,7 @@ class _Check:
         if ds.ndim != rank:
             self.fail(f"/{name}", f"shape {ds.shape}, expected {rank} dimensions")
         self._stored(ds, name)
+        self.ds[name] = ds
         return ds
 
     def _stored(self, ds: h5py.Dataset, name: str) -> None:
@@ -315,34 +317,34 @@ class _Check:
         h5 = self.h5
 
         def expect(name, shape, meaning):
-            if name in h5 and tuple(h5[name].shape) != shape:
-                self.fail(f"/{name}", f"shape {h5[name].shape}, expected {shape} ({meaning})")
+            if name in self.ds and self.ds[name].shape != shape:
+                self.fail(f"/{name}", f"shape {self.ds[name].shape}, expected {shape} ({meaning})")
 
         if "gt" in h5:
-            n = h5["gt/t"].shape[0]
+            n = self.ds["gt/t"].shape[0]
             if n == 0:
                 self.fail("/gt/t", "no ground-truth instants")
             self._limit("/gt/t", n, defaults.MAX_SAMPLES_PER_RECORDING, f"{n} instants")
             expect("gt/flux", (n, H, W), "one frame per /gt/t instant, height × width")
             expect("gt/depth", (n, H, W), "one frame per /gt/t instant, height × width")
         if "poses" in h5:
-            p = h5["poses/t"].shape[0]
+            p = self.ds["poses/t"].shape[0]
             self._limit("/poses/t", p, defaults.MAX_SAMPLES_PER_RECORDING, f"{p} poses")
             expect("poses/camera_to_world", (p, 4, 4), "one 4×4 matrix per /poses/t instant")
         if "spad" in h5:
-            m = h5["spad/bits"].shape[0]
+            m = self.ds["spad/bits"].shape[0]
             self._limit("/spad/bits", m, defaults.MAX_SAMPLES_PER_RECORDING, f"{m} binary frames")
             expect("spad/bits", (m, H, (W + 7) // 8), "binary frames × height × ceil(width / 8) bytes")
             expect("spad/t_start", (m,), "one start per binary frame")
             expect("spad/dcr_cps", (H, W), "height × width")
         if "frames" in h5:
-            k = h5["frames/dn"].shape[0]
+            k = self.ds["frames/dn"].shape[0]
             self._limit("/frames/dn", k, defaults.MAX_SAMPLES_PER_RECORDING, f"{k} frames")
             expect("frames/dn", (k, H, W), "frames × height × width")
             expect("frames/t_start", (k,), "one exposure start per frame")
             expect("frames/t_end", (k,), "one exposure end per frame")
         if "events" in h5:
-            e = h5["events/t"].shape[0]
+            e = self.ds["events/t"].shape[0]
             for name in ("x", "y", "p", "label"):
                 expect(f"events/{name}", (e,), "one value per event, as /events/t")
             expect("events/ms_to_idx", (self.n_ms,), "one entry per millisecond from t = 0 to t_end_s, "
@@ -350,25 +352,25 @@ class _Check:
 
     def _sensor_attrs(self) -> None:
         """Cross-field rules of the sensor groups' attributes and their counts against the datasets."""
-        h5, g = self.h5, self.group_attrs
+        g = self.group_attrs
         if "spad" in g:
             a = g["spad"]
             if a["bin_s"] < defaults.MIN_SPAD_BIN_S:
                 self.fail("/spad.bin_s", f"{a['bin_s']!r} s, shorter than {defaults.MIN_SPAD_BIN_S:g} s")
             if a["gate_s"] > a["bin_s"] * (1 + 1e-9):
                 self.fail("/spad.gate_s", f"{a['gate_s']!r} s, longer than bin_s = {a['bin_s']!r} s")
-            if "n_bins" in a and a["n_bins"] != h5["spad/bits"].shape[0]:
-                self.fail("/spad.n_bins", f"{a['n_bins']}, but /spad/bits holds {h5['spad/bits'].shape[0]}")
+            if "n_bins" in a and a["n_bins"] != self.ds["spad/bits"].shape[0]:
+                self.fail("/spad.n_bins", f"{a['n_bins']}, but /spad/bits holds {self.ds['spad/bits'].shape[0]}")
         if "frames" in g:
             a = g["frames"]
             if not 1 <= a["bit_depth"] <= 16:
                 self.fail("/frames.bit_depth", f"{a['bit_depth']}, expected 1 … 16 (DN are uint16)")
-            if "n_frames" in a and a["n_frames"] != h5["frames/dn"].shape[0]:
-                self.fail("/frames.n_frames", f"{a['n_frames']}, but /frames/dn holds {h5['frames/dn'].shape[0]}")
+            if "n_frames" in a and a["n_frames"] != self.ds["frames/dn"].shape[0]:
+                self.fail("/frames.n_frames", f"{a['n_frames']}, but /frames/dn holds {self.ds['frames/dn'].shape[0]}")
         if "events" in g:
             a = g["events"]
-            if "n_events" in a and a["n_events"] != h5["events/t"].shape[0]:
-                self.fail("/events.n_events", f"{a['n_events']}, but /events/t holds {h5['events/t'].shape[0]}")
+            if "n_events" in a and a["n_events"] != self.ds["events/t"].shape[0]:
+                self.fail("/events.n_events", f"{a['n_events']}, but /events/t holds {self.ds['events/t'].shape[0]}")
             if a.get("ms_to_idx_origin_us", 0) != 0:
                 self.fail("/events.ms_to_idx_origin_us", f"{a['ms_to_idx_origin_us']}, expected 0")
             if a.get("timestamp_unit", "us") != "us":
@@ -379,7 +381,7 @@ class _Check:
     def _blocks(self, name: str, step: int | None = None):
         """``(first_index, block)`` over dataset ``name`` along axis 0, ``step`` rows a block (default: at most
         ``CHUNK_BYTES``, whole HDF5 chunks); a read error of the library is an InputError naming the rows."""
-        ds = self.h5[name]
+        ds = self.ds[name]
         n = ds.shape[0]
         if step is None:
             row_bytes = max(1, ds.dtype.itemsize * int(np.prod(ds.shape[1:], dtype=np.int64)))
@@ -430,7 +432,7 @@ class _Check:
                 self.fail(f"/{name}", f"{label} {block[k].item()!r} {where} (expected {expected})")
 
     def values(self) -> None:
-        h5, H, W = self.h5, self.height, self.width
+        h5, W = self.h5, self.width
         t0, t1 = self.t0, self.t1
         if "gt" in h5:
             self._instants("gt/t", t0, t1)
@@ -454,7 +456,7 @@ class _Check:
                     self.fail("/spad/t_start", f"index {i + k}: {t[k].item()!r} s starts less than bin_s = "
                                                f"{bin_s!r} s after the previous bin")
                 prev = float(t[-1])
-            if not np.all(np.isfinite(dcr := self.h5["spad/dcr_cps"][()]) & (dcr >= 0)):
+            if not np.all(np.isfinite(dcr := self.ds["spad/dcr_cps"][()]) & (dcr >= 0)):
                 k = tuple(int(v) for v in np.argwhere(~(np.isfinite(dcr) & (dcr >= 0)))[0])
                 self.fail("/spad/dcr_cps", f"dark count rate {dcr[k].item()!r} at pixel (row {k[0]}, col {k[1]}) "
                                            "(expected finite values ≥ 0, counts s⁻¹)")
@@ -481,8 +483,7 @@ class _Check:
 
     def _events(self) -> None:
         """Events: columns in range, timestamps sorted inside the span, ``ms_to_idx`` exact; one pass, in chunks."""
-        h5 = self.h5
-        self.n_events = h5["events/t"].shape[0]
+        self.n_events = self.ds["events/t"].shape[0]
         lo_us = math.floor(round(self.t0 * 1e6, 3))
         hi_us = math.ceil(round(self.t1 * 1e6, 3))
         limits = {"x": (self.width, "x outside the sensor (expected 0 … width − 1 = {})"),
@@ -490,7 +491,7 @@ class _Check:
                   "p": (2, "polarity not 0 (OFF) or 1 (ON)"),
                   "label": (MAX_LABEL + 1, "label not 0 … 3")}
         step = EVENT_STEP
-        columns = {k: self._blocks(f"events/{k}", step) for k in limits if f"events/{k}" in h5}
+        columns = {k: self._blocks(f"events/{k}", step) for k in limits if f"events/{k}" in self.ds}
         prev = -(1 << 62)
         k_next = 0  # first ms boundary whose index is not yet checked
         for i, t in self._blocks("events/t", step):
@@ -518,7 +519,7 @@ class _Check:
 
     def _ms_index(self, k0: int, k1: int, first_index) -> None:
         """``ms_to_idx[k0:k1]`` equals ``first_index(boundaries µs)``, read ``EVENT_STEP`` entries at a time."""
-        ds = self.h5["events/ms_to_idx"]
+        ds = self.ds["events/ms_to_idx"]
         for k in range(k0, k1, EVENT_STEP):
             kb = min(k + EVENT_STEP, k1)
             try:
