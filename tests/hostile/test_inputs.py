@@ -70,3 +70,25 @@ def test_sensor_wider_than_the_format_is_refused(tmp_path, fmt, fragment):
     assert not out.exists()
     # DSEC stores uint16 addresses: the same recording exports
     assert export_recording(src.path, "dsec", tmp_path / "events.h5").is_file()
+
+
+@pytest.mark.parametrize("method", ["cf", "akf_fe", "edi"])
+def test_event_methods_refuse_an_event_outside_the_sensor_without_validation(tmp_path, method):
+    # A Recording built by hand skips the validation on open; the event reader in front of the kernels still
+    # refuses x = width (before, its pixel index y·W + x landed on the next row's pixel, or past the array).
+    from simspad.io.recording import Recording
+    from simspad.methods.registry import get_method
+    from tests.helpers.synthetic_recordings import write_recording
+
+    path = tmp_path / "rec.h5"
+    write_recording(path, lambda t: np.full((6, 8), 1e3 * (1.0 + 80.0 * t)) * (1 + np.arange(8)[None] / 8),
+                    shape=(6, 8), spad=False)
+    with h5py.File(path, "r+") as f:
+        x = f["events/x"][()]
+        assert x.size > 10
+        x[x.size // 2] = 8
+        f["events/x"][...] = x
+    with Recording(path, h5py.File(path, "r")) as rec:
+        times = rec.gt.t[1:]
+        with pytest.raises(InputError, match=r"/events/x: event at .* x = 8 outside the sensor \(expected < 8\)"):
+            list(get_method(method).reconstruct(rec, times))
