@@ -2,8 +2,9 @@
 
 :func:`open_recording` refuses missing, corrupt or foreign files, and any file that breaks docs/format.md in its
 structure or in one of its values (:mod:`.validation`), with one clear message naming the file, the field and the
-first bad index; a file validated before in the process and unchanged since is not read again. Methods read recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``,
-``rec.spad``, ``rec.frames``, ``rec.events``), so they run unchanged on real captures converted to this layout.
+first bad index; a file validated before in the process and unchanged since is not read again. Methods read
+recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``, ``rec.spad``, ``rec.frames``,
+``rec.events``), so they run unchanged on real captures converted to this layout.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ class Recording:
         self.frames = FramesView(h5, path, "frames")
         self.events = EventsView(h5, path)
         for view in (self.gt, self.poses, self.spad, self.frames, self.events):
-            view._attrs = attrs.get(view._name)  # read by the validation already (None: read when asked)
+            view.preset_attrs(attrs.get(view.name))
 
     def __enter__(self) -> "Recording":
         return self
