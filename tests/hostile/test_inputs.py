@@ -92,3 +92,24 @@ def test_event_methods_refuse_an_event_outside_the_sensor_without_validation(tmp
         times = rec.gt.t[1:]
         with pytest.raises(InputError, match=r"/events/x: event at .* x = 8 outside the sensor \(expected < 8\)"):
             list(get_method(method).reconstruct(rec, times))
+
+
+def test_a_file_is_validated_once_until_it_changes(tmp_path, monkeypatch):
+    from simspad.io.recording import reader
+
+    calls = []
+    monkeypatch.setattr(reader, "validate_recording", lambda h5, path: calls.append(path) or {})
+    src = write_event_recording(tmp_path / "a.h5", [5, 9], [0, 1], [0, 0], [1, 0], width=4, height=2,
+                                t_start_s=0.0, t_end_s=0.001)
+    for _ in range(2):  # just written: file times tick coarsely, so it is validated at every open
+        open_recording(src.path).close()
+    assert len(calls) == 2
+    monkeypatch.setattr(reader, "_SETTLED_S", -1.0)  # as if it had been left alone long enough
+    for _ in range(3):
+        open_recording(src.path).close()
+    assert len(calls) == 3  # one more validation, then remembered
+    copy = tmp_path / "b.h5"
+    copy.write_bytes(src.path.read_bytes())
+    copy.replace(src.path)  # replaced under the same name: another inode
+    open_recording(src.path).close()
+    assert len(calls) == 4

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from pathlib import Path
 
 import h5py
@@ -113,7 +114,8 @@ def open_recording(path: str | Path) -> Recording:
     streamed in chunks).
 
     A file validated before in this process and unchanged since (same device, inode, size, modification and
-    change times) is not read again: ``simspad evaluate`` opens each recording once per job.
+    change times; unchanged for a second before it was validated) is not read again: ``simspad evaluate`` opens
+    each recording once per job.
 
     Raises
     ------
@@ -125,13 +127,14 @@ def open_recording(path: str | Path) -> Recording:
     path = Path(path)
     h5 = open_checked(path, kind="recording", format=FORMAT, format_version=FORMAT_VERSION)
     try:
-        key = _file_identity(path)
+        key, settled = _file_identity(path)
         attrs = None
         if key not in _VALIDATED:
             attrs = validate_recording(h5, path)
             if len(_VALIDATED) >= _VALIDATED_MAX:
                 _VALIDATED.clear()
-            _VALIDATED.add(key)
+            if settled:
+                _VALIDATED.add(key)
         return Recording(path, h5, attrs)
     except BaseException:
         h5.close()
@@ -141,9 +144,15 @@ def open_recording(path: str | Path) -> Recording:
 #: Identities of the files validated in this process (see :func:`open_recording`); forked workers inherit it.
 _VALIDATED: set[tuple] = set()
 _VALIDATED_MAX = 4096
+#: Seconds since a file's last change after which its identity is trusted to show the next change.
+_SETTLED_S = 1.0
 
 
-def _file_identity(path: Path) -> tuple:
-    """What changes when a file is replaced or rewritten: its resolved path, device, inode, size, m- and ctime."""
+def _file_identity(path: Path) -> tuple[tuple, bool]:
+    """What changes when a file is replaced or rewritten (its resolved path, device, inode, size, m- and ctime),
+    and whether it has been left alone for :data:`_SETTLED_S`: file times tick with the kernel's coarse clock
+    (milliseconds), so a rewrite right after the last one could keep the same times; a file changed that recently
+    is validated again at every open."""
     st = os.stat(path)
-    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    settled = time.time() - max(st.st_mtime, st.st_ctime) > _SETTLED_S
+    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns), settled
