@@ -9,7 +9,8 @@ Two stages, so that the suite stays inside its budget:
 2. in one child process (:mod:`tests.hostile.fuzz_driver`), a stratified subset — the first seed of every
    mutation kind, every valid control and every submission mutation — goes through the command line itself:
    ``info``, ``evaluate`` (every method the recording allows), ``score`` and ``export`` to every format.
-   Under a load average of 11 on 2 cores this stage takes about 30 s of wall time for 8 s of CPU.
+   On the shared 2-core machine (load average 7–11) this stage took 10–30 s of wall time, about 8 s of CPU;
+   the whole file 20–50 s.
 
 A few headline findings of issue 33 also run as separate ``simspad`` processes, whose exit status shows a signal.
 """
