@@ -30,6 +30,14 @@ def decode_attr(value):
     return value
 
 
+def _root_attr(h5: h5py.File, name: str, default, path: Path):
+    """The root attribute ``name`` decoded (``default`` when absent); InputError when the library cannot read it."""
+    try:
+        return decode_attr(h5.attrs.get(name, default))
+    except Exception:  # noqa: BLE001 - an attribute type h5py cannot read, or text that is not UTF-8
+        raise InputError("attribute of an unsupported type or unreadable", path=path, field=f"/.{name}") from None
+
+
 def open_checked(path: str | Path, *, kind: str, format: str, format_version: int,
                  default_version=_REQUIRED) -> h5py.File:
     """Open the HDF5 file ``path`` read-only and check its ``format`` and ``format_version`` root attributes.
@@ -66,12 +74,11 @@ def open_checked(path: str | Path, *, kind: str, format: str, format_version: in
     except OSError:
         raise InputError("not a readable HDF5 file (corrupt or truncated?)", path=path) from None
     try:
-        found = decode_attr(h5.attrs.get("format"))
+        found = _root_attr(h5, "format", None, path)
         if found != format:
             raise InputError(f"not a SimSPAD {kind} (format attr is {found!r}, expected {format!r})",
                              path=path, field="/.format")
-        version = h5.attrs.get("format_version", None if default_version is _REQUIRED else default_version)
-        version = decode_attr(version)
+        version = _root_attr(h5, "format_version", None if default_version is _REQUIRED else default_version, path)
         if version != format_version:
             raise InputError(f"unsupported format_version {version!r} (this SimSPAD reads {format_version})",
                              path=path, field="/.format_version")

@@ -4,16 +4,25 @@ Layout: ``/t`` [N] float64 s, ``/flux`` [N,H,W] float32 ph s⁻¹ m⁻² (one ch
 :data:`simspad.io.compression.FLOAT_FRAMES_STORAGE`; an outside reader imports ``hdf5plugin`` first), root
 attributes ``method``, ``recording``, ``units``. Frames are written as the method produces them, a few at a
 time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same).
+
+:func:`open_reconstruction` reads one back, validated like every input (attributes are strings, ``/t`` finite
+and increasing, ``/flux`` float32 ``[N, H, W]``, finite and ≥ 0, checked a few frames at a time): a damaged or
+foreign file is one :class:`~simspad.errors.InputError` naming the file, the dataset and the first bad index.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Iterator
 
 import h5py
 import numpy as np
 
+from simspad import defaults
+from simspad.errors import InputError
 from simspad.io.compression import FLOAT_FRAMES_STORAGE
+from simspad.io.hdf5 import decode_attr
+from simspad.io.safe_paths import refuse_hdf5_links
 
 #: Most bytes of frames held before they are written (memory does not grow with the sequence length).
 BUFFER_BYTES = 8 * 2**20
@@ -67,3 +76,111 @@ class ReconstructionSink:
             self.flush()
         finally:
             self.h5.close()
+
+
+#: Root attributes of a reconstruction file, all strings.
+ATTRS = ("method", "recording", "units")
+
+
+class SavedReconstruction:
+    """A reconstruction file read back (open it with :func:`open_reconstruction`; use as a context manager).
+
+    Attributes
+    ----------
+    path : Path
+    method, recording, units : str
+        The root attributes.
+    t : ndarray [N] float64
+        The instants, s.
+    shape : (H, W)
+        Frame shape, pixels.
+    """
+
+    def __init__(self, path: Path, h5: h5py.File, attrs: dict, t: np.ndarray):
+        self.path = path
+        self._h5 = h5
+        self.method, self.recording, self.units = (attrs[k] for k in ATTRS)
+        self.t = t
+        self.shape = tuple(h5["flux"].shape[1:])
+
+    def frames(self, chunk: int = 8) -> Iterator[tuple[int, np.ndarray]]:
+        """Yield ``(first_index, flux[n, H, W])`` blocks of ``chunk`` frames (ph s⁻¹ m⁻²)."""
+        ds = self._h5["flux"]
+        for i in range(0, ds.shape[0], chunk):
+            yield i, _read(ds, np.s_[i:i + chunk], "/flux", self.path)
+
+    def close(self) -> None:
+        self._h5.close()
+
+    def __enter__(self) -> "SavedReconstruction":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _read(ds, selection, field: str, path: Path) -> np.ndarray:
+    try:
+        return ds[selection]
+    except Exception as exc:  # noqa: BLE001 - the library's own errors for damaged data or a missing filter
+        raise InputError(f"unreadable ({str(exc)[:100]})", path=path, field=field) from None
+
+
+def open_reconstruction(path: str | Path) -> SavedReconstruction:
+    """Open and validate a reconstruction file of a results directory.
+
+    Raises
+    ------
+    InputError
+        Missing, not HDF5, a link inside, an attribute missing or not a string, ``/t`` or ``/flux`` missing, of
+        another dtype or shape, or holding a value out of range; the message names the file, the field and the
+        first bad index.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such reconstruction file", path=path)
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError:
+        raise InputError("not a readable HDF5 file (corrupt or truncated?)", path=path) from None
+    try:
+        refuse_hdf5_links(h5, path)
+        attrs = {}
+        for key in ATTRS:
+            try:
+                value = decode_attr(h5.attrs[key]) if key in h5.attrs else None
+            except Exception:  # noqa: BLE001 - an attribute type h5py cannot read
+                value = None
+            if not isinstance(value, str):
+                raise InputError(f"expected a string attribute, got {str(value)[:40]!r}", path=path,
+                                 field=f"/.{key}")
+            attrs[key] = value
+        for name, dtype, rank in (("t", "float64", 1), ("flux", "float32", 3)):
+            if not isinstance(h5.get(name), h5py.Dataset):
+                raise InputError("dataset missing", path=path, field=f"/{name}")
+            ds = h5[name]
+            if ds.dtype != np.dtype(dtype) or ds.ndim != rank:
+                raise InputError(f"dtype {ds.dtype.str}, shape {ds.shape}: expected {dtype} with {rank} "
+                                 "dimension(s)", path=path, field=f"/{name}")
+        n, H, W = h5["flux"].shape
+        if h5["t"].shape[0] != n:
+            raise InputError(f"{n} frames but {h5['t'].shape[0]} instants", path=path, field="/flux")
+        if H * W > defaults.MAX_RENDER_PIXELS or n > defaults.MAX_SAMPLES_PER_RECORDING:
+            raise InputError(f"{n} frames of {W} × {H} pixels, above the limits", path=path, field="/flux")
+        t = _read(h5["t"], (), "/t", path)
+        bad_t = ~np.isfinite(t) | (t <= np.concatenate(([-np.inf], t[:-1])))
+        if bad_t.any():
+            i = int(np.argmax(bad_t))
+            raise InputError(f"index {i}: {t[i].item()!r} s, expected finite instants, increasing", path=path,
+                             field="/t")
+        rec = SavedReconstruction(path, h5, attrs, t)
+        for i, block in rec.frames():
+            bad = ~(np.isfinite(block) & (block >= 0))
+            if bad.any():
+                k, r, c = (int(v) for v in np.argwhere(bad)[0])
+                raise InputError(f"flux {block[k, r, c].item()!r} at pixel (row {r}, col {c}) of frame {i + k} "
+                                 "(expected finite values ≥ 0)", path=path, field="/flux")
+    except BaseException:
+        h5.close()
+        raise
+    return rec

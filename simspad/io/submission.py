@@ -110,6 +110,15 @@ def _numeric(ds, field: str, path: Path, kind: str):
         raise InputError(f"dtype {ds.dtype}, expected {kind}", path=path, field=field)
 
 
+def _read(ds, selection, field: str, path: Path) -> np.ndarray:
+    """``ds[selection]``; a read error of the HDF5 library (a corrupt chunk, a filter this installation lacks) is
+    an InputError naming the dataset."""
+    try:
+        return ds[selection]
+    except Exception as exc:  # noqa: BLE001 - the library's own errors for damaged data
+        raise InputError(f"unreadable ({str(exc)[:100]})", path=path, field=field) from None
+
+
 def check_group_members(group: h5py.Group, name: str, path: Path) -> None:
     """The group holds exactly ``t`` (float64) and ``flux`` (float32) datasets."""
     for member in group:
@@ -134,7 +143,7 @@ def check_group_frames(group: h5py.Group, name: str, gt_t: np.ndarray, shape: tu
     if t_ds.shape[0] != gt_t.size:
         raise InputError(f"{t_ds.shape[0]} instants, expected the {gt_t.size} ground-truth evaluation instants "
                          f"of {recording}", path=path, field=f"/{name}/t")
-    t = t_ds[()]
+    t = _read(t_ds, (), f"/{name}/t", path)
     if not np.all(np.isfinite(t)):
         raise InputError("timestamps hold NaN or inf", path=path, field=f"/{name}/t")
     bad = np.nonzero(np.abs(t - gt_t) > TIME_ATOL_S)[0]
@@ -147,7 +156,7 @@ def check_group_frames(group: h5py.Group, name: str, gt_t: np.ndarray, shape: tu
         raise InputError(f"shape {f_ds.shape}, expected {(gt_t.size, H, W)} (N instants × height × width)",
                          path=path, field=f"/{name}/flux")
     for i in range(0, gt_t.size, _CHECK_FRAMES):
-        block = f_ds[i:i + _CHECK_FRAMES]
+        block = _read(f_ds, np.s_[i:i + _CHECK_FRAMES], f"/{name}/flux", path)
         if not np.all(np.isfinite(block)):
             j = i + int(np.nonzero(~np.isfinite(block).reshape(block.shape[0], -1).all(axis=1))[0][0])
             raise InputError(f"frame {j} holds NaN or inf values", path=path, field=f"/{name}/flux")

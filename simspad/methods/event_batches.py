@@ -82,6 +82,7 @@ class EventCursor:
         c_on, c_off, _ = event_thresholds(rec)
         self.rec = rec
         self.width = int(rec.width)
+        self.height = int(rec.height)
         self.on_dl = c_on if on_dl is None else float(on_dl)
         self.off_dl = c_off if off_dl is None else float(off_dl)
         self.n_read = 0
@@ -99,12 +100,27 @@ class EventCursor:
         x = np.asarray(ev["x"])[keep].astype(np.int64)
         y = np.asarray(ev["y"])[keep].astype(np.int64)
         p = np.asarray(ev["p"])[keep]
+        self._check_addresses(x, y, t0_s)
         if t.size > 1 and np.any(np.diff(t) < 0):
             order = np.argsort(t, kind="stable")
             t, x, y, p = t[order], x[order], y[order], p[order]
         dl = np.where(p > 0, self.on_dl, -self.off_dl)
         self.n_read += int(t.size)
         return EventBatch(t, y * self.width + x, dl, t0_s, t1_s)
+
+
+    def _check_addresses(self, x: np.ndarray, y: np.ndarray, t0_s: float) -> None:
+        """InputError when an event lies outside the sensor: the kernels index per-pixel state with ``y·W + x``.
+
+        :func:`~simspad.io.recording.open_recording` refuses such files already; this guard keeps the kernels
+        safe for a recording built around an h5py file by hand.
+        """
+        for name, v, limit in (("x", x, self.width), ("y", y, self.height)):
+            bad = v >= limit
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise InputError(f"event at {t0_s:.6f} s or later: {name} = {int(v[k])} outside the sensor "
+                                 f"(expected < {limit})", path=self.rec.path, field=f"/events/{name}")
 
 
 def group_by_pixel(pix: np.ndarray, n_pixels: int) -> tuple[np.ndarray, np.ndarray]:

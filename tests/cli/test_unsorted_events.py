@@ -6,7 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from simspad.io.recording import open_recording
+from simspad.io.recording import Recording, open_recording, validation
 from simspad.errors import InputError
 from tests.helpers.synthetic_recordings import write_recording
 
@@ -24,10 +24,16 @@ def unsorted_recording(tmp_path):
     return path, i
 
 
-def test_time_order_is_checked_chunk_by_chunk(unsorted_recording):
+def test_time_order_is_checked_chunk_by_chunk(unsorted_recording, monkeypatch):
     path, i = unsorted_recording
-    with open_recording(path) as rec:
-        for chunk in (2, 7, 1 << 20):  # the disorder at a chunk boundary or inside a chunk
+    with pytest.raises(InputError, match=rf"/events/t: not sorted \(event {i} at "):
+        open_recording(path)  # validation on open, in chunks
+    monkeypatch.setattr(validation, "EVENT_STEP", 7)
+    with pytest.raises(InputError, match=rf"/events/t: not sorted \(event {i} at "):
+        open_recording(path)  # the disorder inside a chunk or at a chunk boundary
+    # The readers' own checks, on a file opened without validation (a Recording built by hand)
+    with Recording(path, h5py.File(path, "r")) as rec:
+        for chunk in (2, 7, 1 << 20):
             with pytest.raises(InputError, match=rf"/events/t: not sorted \(event {i} at "):
                 rec.events.check_time_order(chunk)
             with pytest.raises(InputError, match=rf"/events/t: not sorted \(event {i} at "):

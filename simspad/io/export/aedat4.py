@@ -16,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from simspad.errors import SimSpadError
+from simspad.errors import InputError, SimSpadError
 from simspad.io.atomic import atomic_path
 from simspad.io.export.common import EXPORT_CHUNK_EVENTS, check_sorted, require_group
 
+#: Largest width and height: dv-processing stores event addresses as int16.
+MAX_SIDE = 1 << 15
 #: Camera name stored in the file's stream metadata.
 CAMERA_NAME = "SimSPAD"
 
@@ -46,6 +48,9 @@ def export_aedat4(rec, out: Path, *, chunk_events: int = EXPORT_CHUNK_EVENTS) ->
         Events per event store handed to the writer.
     """
     require_group(rec, "events", "aedat4")
+    if rec.width > MAX_SIDE or rec.height > MAX_SIDE:
+        raise InputError(f"AEDAT 4 event addresses are int16: {rec.width} × {rec.height} pixels exceed "
+                         f"{MAX_SIDE} × {MAX_SIDE}", path=rec.path, field="/.width")
     dv = _dv()
     config = dv.io.MonoCameraWriter.EventOnlyConfig(CAMERA_NAME, (rec.width, rec.height))
     with atomic_path(out) as tmp:

@@ -2,7 +2,8 @@
 
 Writing goes through :class:`RecordingWriter` (:mod:`.writer`), reading through :func:`open_recording`, which
 returns a :class:`Recording` with one view per group (:mod:`.ground_truth`, :mod:`.spad`, :mod:`.frames`,
-:mod:`.events`); :mod:`.layout` names the format and what each group holds. This package presents that API.
+:mod:`.events`) once :mod:`.validation` has checked the file against docs/format.md; :mod:`.layout` names the
+format and what each group holds. This package presents that API.
 """
 
 from simspad.io.recording.layout import FORMAT, FORMAT_VERSION, SENSOR_KINDS

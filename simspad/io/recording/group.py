@@ -33,6 +33,16 @@ class GroupView:
         self._datasets: dict[str, h5py.Dataset] = {}
 
     @property
+    def name(self) -> str:
+        """The group's name ("gt", "spad", …)."""
+        return self._name
+
+    def preset_attrs(self, attrs: dict | None) -> None:
+        """Take the group's attributes as already read and decoded (by the validation on open); None: read them
+        when first asked for."""
+        self._attrs = attrs
+
+    @property
     def attrs(self) -> dict:
         """Attributes of the group as plain Python values (JSON text left as text); read once (a recording is
         opened read-only), a fresh dict each time."""

@@ -1,32 +1,28 @@
 """Reading a recording (docs/format.md): :func:`open_recording` validates the file, :class:`Recording` reads it.
 
-:func:`open_recording` refuses missing, corrupt or foreign files with one clear message naming the file and the
-field. Methods read recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``,
-``rec.spad``, ``rec.frames``, ``rec.events``), so they run unchanged on real captures converted to this layout.
+:func:`open_recording` refuses missing, corrupt or foreign files, and any file that breaks docs/format.md in its
+structure or in one of its values (:mod:`.validation`), with one clear message naming the file, the field and the
+first bad index; a file validated before in the process and unchanged since is not read again. Methods read
+recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``, ``rec.spad``, ``rec.frames``,
+``rec.events``), so they run unchanged on real captures converted to this layout.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import time
 from pathlib import Path
 
 import h5py
-import numpy as np
 
-from simspad.errors import InputError
 from simspad.io.hdf5 import decode_attr, open_checked
 from simspad.io.recording.events import EventsView
 from simspad.io.recording.frames import FramesView
 from simspad.io.recording.ground_truth import GroundTruthView, PosesView
-from simspad.io.recording.layout import (
-    FORMAT,
-    FORMAT_VERSION,
-    REQUIRED_DATASETS,
-    REQUIRED_GROUP_ATTRS,
-    REQUIRED_ROOT_ATTRS,
-    SENSOR_KINDS,
-)
+from simspad.io.recording.layout import FORMAT, FORMAT_VERSION, SENSOR_KINDS
 from simspad.io.recording.spad import SpadView
+from simspad.io.recording.validation import validate_recording
 
 
 class Recording:
@@ -49,15 +45,18 @@ class Recording:
         ``/events``: ``attrs``, ``n_events``, ``ms_to_idx``, ``window(t0_s, t1_s)``, ``iter_chunks``, …
     """
 
-    def __init__(self, path: Path, h5: h5py.File):
+    def __init__(self, path: Path, h5: h5py.File, attrs: dict[str, dict] | None = None):
         self.path = path
         self.h5 = h5
-        self.attrs = {k: decode_attr(v) for k, v in h5.attrs.items()}
+        attrs = attrs or {}
+        self.attrs = attrs["/"] if "/" in attrs else {k: decode_attr(v) for k, v in h5.attrs.items()}
         self.gt = GroundTruthView(h5, path, "gt")
         self.poses = PosesView(h5, path, "poses")
         self.spad = SpadView(h5, path, self.width, self.height)
         self.frames = FramesView(h5, path, "frames")
         self.events = EventsView(h5, path)
+        for view in (self.gt, self.poses, self.spad, self.frames, self.events):
+            view.preset_attrs(attrs.get(view.name))
 
     def __enter__(self) -> "Recording":
         return self
@@ -111,70 +110,49 @@ class Recording:
 
 
 def open_recording(path: str | Path) -> Recording:
-    """Open and validate a recording.
+    """Open a recording and validate it against docs/format.md (:mod:`.validation`: structure and every value,
+    streamed in chunks).
+
+    A file validated before in this process and unchanged since (same device, inode, size, modification and
+    change times; unchanged for a second before it was validated) is not read again: ``simspad evaluate`` opens
+    each recording once per job.
 
     Raises
     ------
     InputError
         Missing file, not HDF5 (corrupt or truncated), a foreign HDF5 (``format`` attr), an unsupported
-        version, or a missing dataset/attribute; the message names the file and the field.
+        version, or any violation of the format (a missing dataset or attribute, a wrong dtype or shape, a value
+        out of range); the message names the file, the field and the first bad index.
     """
     path = Path(path)
     h5 = open_checked(path, kind="recording", format=FORMAT, format_version=FORMAT_VERSION)
     try:
-        _check_layout(h5, path)
+        key, settled = _file_identity(path)
+        attrs = None
+        if key not in _VALIDATED:
+            attrs = validate_recording(h5, path)
+            if len(_VALIDATED) >= _VALIDATED_MAX:
+                _VALIDATED.clear()
+            if settled:
+                _VALIDATED.add(key)
+        return Recording(path, h5, attrs)
     except BaseException:
         h5.close()
         raise
-    return Recording(path, h5)
 
 
-def _scalar_attr(h5: h5py.File, key: str, path: Path, *, integer: bool) -> None:
-    """A required root attribute is one finite number (a positive integer for width and height)."""
-    value = decode_attr(h5.attrs[key])
-    if isinstance(value, np.ndarray) and value.size == 1:
-        value = value.reshape(()).item()
-    if isinstance(value, np.generic):
-        value = value.item()
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
-    if ok and integer:
-        ok = float(value).is_integer() and value > 0
-    if not ok:
-        expected = "a positive integer" if integer else "a finite number"
-        raise InputError(f"expected {expected}, got {str(value)[:60]!r}", path=path, field=f"/.{key}")
+#: Identities of the files validated in this process (see :func:`open_recording`); forked workers inherit it.
+_VALIDATED: set[tuple] = set()
+_VALIDATED_MAX = 4096
+#: Seconds since a file's last change after which its identity is trusted to show the next change.
+_SETTLED_S = 1.0
 
 
-def _check_layout(h5: h5py.File, path: Path) -> None:
-    """InputError naming the first missing root attribute, dataset or group attribute, or a mismatched shape."""
-    for key in REQUIRED_ROOT_ATTRS:
-        if key not in h5.attrs:
-            raise InputError("missing root attribute", path=path, field=f"/.{key}")
-        _scalar_attr(h5, key, path, integer=key in ("width", "height"))
-    H, W = int(h5.attrs["height"]), int(h5.attrs["width"])
-    for group, names in REQUIRED_DATASETS.items():
-        if group not in h5:
-            continue
-        if not isinstance(h5[group], h5py.Group):
-            raise InputError("expected a group, found a dataset", path=path, field=f"/{group}")
-        for name in names:
-            if name not in h5:
-                raise InputError("dataset missing", path=path, field=f"/{name}")
-            if not isinstance(h5[name], h5py.Dataset):
-                raise InputError("expected a dataset, found a group", path=path, field=f"/{name}")
-    for group, keys in REQUIRED_GROUP_ATTRS.items():
-        if group in h5:
-            for key in keys:
-                if key not in h5[group].attrs:
-                    raise InputError("attribute missing", path=path, field=f"/{group}.{key}")
-    checks = [("gt/flux", (H, W), 1), ("spad/bits", (H, (W + 7) // 8), 1), ("frames/dn", (H, W), 1),
-              ("spad/dcr_cps", (H, W), 0)]
-    for name, tail, axis0 in checks:
-        if name in h5 and tuple(h5[name].shape[axis0:]) != tail:
-            raise InputError(f"shape {h5[name].shape} does not match width {W} × height {H}",
-                             path=path, field=f"/{name}")
-    if "events" in h5:
-        n = h5["events/t"].shape[0]
-        for k in ("x", "y", "p"):
-            if h5[f"events/{k}"].shape[0] != n:
-                raise InputError(f"length {h5[f'events/{k}'].shape[0]} differs from events/t ({n})",
-                                 path=path, field=f"/events/{k}")
+def _file_identity(path: Path) -> tuple[tuple, bool]:
+    """What changes when a file is replaced or rewritten (its resolved path, device, inode, size, m- and ctime),
+    and whether it has been left alone for :data:`_SETTLED_S`: file times tick with the kernel's coarse clock
+    (milliseconds), so a rewrite right after the last one could keep the same times; a file changed that recently
+    is validated again at every open."""
+    st = os.stat(path)
+    settled = time.time() - max(st.st_mtime, st.st_ctime) > _SETTLED_S
+    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns), settled
