@@ -27,6 +27,7 @@ from PIL import Image
 
 from simspad.errors import InputError, SimSpadError
 from simspad.io.atomic import check_output_path
+from simspad.io.csv_cells import csv_safe, csv_unescape
 from simspad.io.safe_paths import confined_path
 
 RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "speed_factor",
@@ -55,16 +56,18 @@ def _fmt(v) -> str:
 
 
 def write_csv(path: Path, columns, rows) -> None:
+    """``columns`` then one line per row; text a spreadsheet would run as a formula is escaped
+    (:func:`simspad.io.csv_cells.csv_safe`; :func:`read_csv` undoes it)."""
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(columns)
         for r in rows:
-            w.writerow([_fmt(r.get(c)) for c in columns])
+            w.writerow([_fmt(csv_safe(r.get(c))) for c in columns])
 
 
 def _parse(col: str, v: str):
     if col in ("method", "label", "sensors", "scene", "sequence", "recording", "image", "error"):
-        return v
+        return csv_unescape(v)
     if col == "absolute_scale":
         return v.strip().lower() in ("true", "1", "yes")
     if col in ("n_frames", "frame"):

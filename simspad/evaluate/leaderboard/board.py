@@ -23,6 +23,7 @@ import numpy as np
 
 from simspad.errors import SimSpadError
 from simspad.io.results_dir import read_csv
+from simspad.io.safe_paths import confined_path
 
 DAGGER = "†"
 
@@ -66,6 +67,7 @@ def load_results(results_dirs) -> list[tuple[dict, Path]]:
         csv_path = d / "results.csv"
         if not csv_path.is_file():
             raise SimSpadError("not a results directory (results.csv missing)", path=d)
+        confined_path(d, "results.csv", source=d, field="results.csv")  # a link out of d is not read
         try:
             rows = read_csv(csv_path)
         except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -101,6 +103,8 @@ def missing_recordings(results_dirs) -> set[str]:
     """Recordings a scored submission left out (``missing_recordings`` of its ``results.json``)."""
     out: set[str] = set()
     for d in results_dirs:
+        if (Path(d) / "results.json").exists():
+            confined_path(d, "results.json", source=d, field="results.json")
         try:
             meta = json.loads((Path(d) / "results.json").read_text(encoding="utf-8"))
         except (OSError, ValueError):
