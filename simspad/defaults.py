@@ -54,3 +54,10 @@ MAX_EVENT_NOISE_DRAWS = 1e10
 #: the internal steps, and crossings have converged at 1e-5 (benchmarks/bench_events.py's reference); 1e-6 is
 #: already ~100× the default's steps, 1e-12 would be ~10⁵×.
 MIN_SUBSTEP_TOLERANCE = 1e-6
+#: Most rows of a results.csv the leaderboard reads (methods × recordings; reading and merging take ~0.3 ms a row).
+MAX_RESULTS_ROWS = 200_000
+#: Most methods one leaderboard shows: each is a line of every plot and a heatmap panel (~0.5 s of CPU each).
+MAX_LEADERBOARD_METHODS = 50
+#: Most table columns (scene × speed × lux) and light-level × speed cells of one leaderboard's regime map.
+MAX_LEADERBOARD_COLUMNS = 1000
+MAX_LEADERBOARD_REGIME_CELLS = 400

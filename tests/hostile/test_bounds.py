@@ -145,3 +145,82 @@ def test_scene_free_noise_rate_is_a_lower_bound_of_any_scene(lux):
 
 def test_bounds_are_named_in_defaults():
     assert defaults.MAX_EVENT_NOISE_DRAWS == 1e10 and defaults.MIN_SUBSTEP_TOLERANCE == 1e-6
+
+
+# ---- leaderboard: a results.csv of 20 001 rows -------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def scored_results(tmp_path_factory, evaluation_dataset, simspad_cli) -> Path:
+    from tests.helpers.evaluation_data import write_submission
+
+    root = tmp_path_factory.mktemp("scored")
+    sub = write_submission(root / "sub.h5", evaluation_dataset)
+    proc = simspad_cli.run("score", sub, "--dataset", evaluation_dataset, "--out", root / "res")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return root / "res"
+
+
+def _grown_results(src: Path, dst: Path, n_rows: int, vary: str) -> Path:
+    shutil.copytree(src, dst)
+    with open(src / "results.csv", newline="", encoding="utf-8") as f:
+        base = list(csv.DictReader(f))
+    with open(dst / "results.csv", "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, list(base[0]))
+        w.writeheader()
+        for i in range(n_rows):
+            row = dict(base[i % len(base)])
+            if vary == "method":
+                row["method"] = f"m{i}"
+            elif vary == "scene":
+                row.update(scene=f"s{i}", recording=f"recordings/s{i}.h5", image="")
+            elif vary == "lux":
+                row.update(lux=str(1.0 + i), recording=f"recordings/l{i}.h5", image="")
+            w.writerow(row)
+    return dst
+
+
+@pytest.mark.parametrize("vary, figure", [("method", "20001 methods, above the 50"),
+                                          ("scene", "20001 scene × speed × lux columns, above the 1000"),
+                                          ("lux", "light-level × speed cells (20001 × 1), above the 400")])
+def test_leaderboard_of_20001_rows_is_refused_with_the_figure(simspad_cli, scored_results, tmp_path, vary, figure):
+    res = _grown_results(scored_results, tmp_path / "res", 20001, vary)
+    start = time.monotonic()
+    proc = simspad_cli.run("leaderboard", res, "--out", tmp_path / "board")
+    assert time.monotonic() - start < REFUSAL_S
+    line = _one_error_line(proc)
+    assert figure in line and "SIMSPAD_IGNORE_LIMITS=1" in line and "results.csv" in line
+    assert not (tmp_path / "board").exists()
+
+
+def test_results_table_rows_are_bounded_while_reading(scored_results, tmp_path, monkeypatch):
+    from simspad.errors import InputError
+    from simspad.io.results_dir import read_csv
+
+    monkeypatch.delenv("SIMSPAD_IGNORE_LIMITS", raising=False)
+    monkeypatch.setattr(defaults, "MAX_RESULTS_ROWS", 100)
+    res = _grown_results(scored_results, tmp_path / "res", 101, "method")
+    with pytest.raises(InputError, match="more than 100 rows"):
+        read_csv(res / "results.csv")
+    assert len(read_csv(scored_results / "results.csv")) == 2
+    monkeypatch.setenv("SIMSPAD_IGNORE_LIMITS", "1")
+    assert len(read_csv(res / "results.csv")) == 101
+
+
+def test_leaderboard_of_many_recordings_is_linear(simspad_cli, scored_results, tmp_path):
+    """20 000 recordings of one method: choosing the image strips scanned every recording per recording (4·10⁸
+    steps, minutes); now one pass."""
+    res = tmp_path / "res"
+    shutil.copytree(scored_results, res)
+    with open(scored_results / "results.csv", newline="", encoding="utf-8") as f:
+        base = list(csv.DictReader(f))
+    with open(res / "results.csv", "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, list(base[0]))
+        w.writeheader()
+        for i in range(20000):
+            row = dict(base[i % len(base)])
+            row.update(method="m", recording=f"recordings/r{i}.h5", scene=f"s{i % 20}")
+            w.writerow(row)
+    start = time.monotonic()
+    proc = simspad_cli.run("leaderboard", res, "--out", tmp_path / "board")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert time.monotonic() - start < 40  # ~8 s; 60 s before
