@@ -54,7 +54,13 @@ from simspad.evaluate.protocol import (
     score_frames,
     star_figures,
 )
-from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
+from simspad.evaluate.recordings import (
+    RecordingEntry,
+    check_unique_keys,
+    fill_entry,
+    list_recordings,
+    spec_evaluation,
+)
 from simspad.io.atomic import atomic_path
 from simspad.io.reconstructions import ReconstructionSink
 from simspad.io.recording import open_recording
@@ -304,8 +310,10 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         raise SimSpadError("an output directory is required", field="--out")
     out_dir = Path(out_dir)
     check_output_dir(out_dir)
-    entries, manifest = list_recordings(Path(target))
-    entries = [fill_entry(e) for e in entries]
+    entries, manifest = list_recordings(Path(target), progress)
+    entries = [fill_entry(e) for e in tqdm(entries, desc="reading recordings", unit="rec", file=sys.stderr,
+                                           delay=2.0, disable=not progress, leave=False)]
+    check_unique_keys(entries)
     ev = spec_evaluation(manifest, entries[0])
     if rate_hz is None:
         rate_hz = float(ev.get("rate_hz", DEFAULT_RATE_HZ) or DEFAULT_RATE_HZ)
@@ -318,7 +326,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
             get_method(m)  # unknown names are bad input: fail before doing anything
     tasks = []
     whites = {}
-    for e in entries:
+    for e in tqdm(entries, desc="white points", unit="rec", file=sys.stderr, delay=2.0, disable=not progress,
+                  leave=False):
         with open_recording(e.path) as rec:
             idx = evaluation_indices(rec.gt.t, rate_hz)
             if idx.size == 0:

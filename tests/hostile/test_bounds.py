@@ -224,3 +224,44 @@ def test_leaderboard_of_many_recordings_is_linear(simspad_cli, scored_results, t
     proc = simspad_cli.run("leaderboard", res, "--out", tmp_path / "board")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert time.monotonic() - start < 40  # ~8 s; 60 s before
+
+
+# ---- evaluate: one recording listed 80 000 times --------------------------------------------------------------
+
+def test_evaluate_refuses_a_manifest_listing_one_recording_twice(simspad_cli, evaluation_dataset, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(evaluation_dataset, ds)
+    manifest = json.loads((ds / "manifest.json").read_text())
+    first = manifest["recordings"][0]
+    twin = dict(first, path="./" + first["path"])  # the same file spelt another way
+    manifest["recordings"] = [first] + [dict(first) for _ in range(79_998)] + [twin]
+    (ds / "manifest.json").write_text(json.dumps(manifest))
+    start = time.monotonic()
+    proc = simspad_cli.run("evaluate", ds, "--methods", "ni", "--out", tmp_path / "res")
+    assert time.monotonic() - start < REFUSAL_S
+    line = _one_error_line(proc)
+    assert "manifest.json: recordings[1].path" in line and "recordings[0] already lists" in line
+    manifest["recordings"] = [first, twin]
+    (ds / "manifest.json").write_text(json.dumps(manifest))
+    line = _one_error_line(simspad_cli.run("evaluate", ds, "--methods", "ni", "--out", tmp_path / "res"))
+    assert "recordings[1].path" in line
+    assert not (tmp_path / "res").exists()
+
+
+def test_evaluate_refuses_two_recordings_with_one_key(simspad_cli, evaluation_dataset, tmp_path):
+    """A folder of copies: their images and reconstructions would overwrite each other."""
+    folder = tmp_path / "copies"
+    folder.mkdir()
+    src = evaluation_dataset / "recordings" / "ramp" / "ramp_10lx.h5"
+    shutil.copy(src, folder / "a.h5")
+    shutil.copy(src, folder / "b.h5")
+    line = _one_error_line(simspad_cli.run("evaluate", folder, "--methods", "ni", "--out", tmp_path / "res"))
+    assert "b.h5" in line and "ramp_10lx" in line and "a.h5" in line
+
+
+def test_evaluate_does_not_follow_a_recording_linked_out_of_its_folder(simspad_cli, evaluation_dataset, tmp_path):
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    (folder / "linked.h5").symlink_to(evaluation_dataset / "recordings" / "ramp" / "ramp_10lx.h5")
+    line = _one_error_line(simspad_cli.run("evaluate", folder, "--methods", "ni", "--out", tmp_path / "res"))
+    assert "linked.h5" in line and "outside" in line
