@@ -61,3 +61,6 @@ MAX_LEADERBOARD_METHODS = 50
 #: Most table columns (scene × speed × lux) and light-level × speed cells of one leaderboard's regime map.
 MAX_LEADERBOARD_COLUMNS = 1000
 MAX_LEADERBOARD_REGIME_CELLS = 400
+#: Seconds `generate --executor dask --scheduler ADDRESS` waits for the scheduler to answer (connection and
+#: handshake); the environment variable SIMSPAD_DASK_CONNECT_TIMEOUT_S overrides it.
+DASK_CONNECT_TIMEOUT_S = 15.0

@@ -265,3 +265,65 @@ def test_evaluate_does_not_follow_a_recording_linked_out_of_its_folder(simspad_c
     (folder / "linked.h5").symlink_to(evaluation_dataset / "recordings" / "ramp" / "ramp_10lx.h5")
     line = _one_error_line(simspad_cli.run("evaluate", folder, "--methods", "ni", "--out", tmp_path / "res"))
     assert "linked.h5" in line and "outside" in line
+
+
+# ---- Dask: a scheduler address that accepts and never answers -------------------------------------------------
+
+@pytest.fixture()
+def silent_listener():
+    """A plain TCP socket on 127.0.0.1 that accepts connections and never sends a byte."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(16)
+    accepted, stop = [], threading.Event()
+
+    def accept():
+        server.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                accepted.append(server.accept()[0])
+            except OSError:
+                continue
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    yield f"tcp://127.0.0.1:{server.getsockname()[1]}", accepted
+    stop.set()
+    thread.join()
+    for conn in accepted:
+        conn.close()
+    server.close()
+
+
+def test_generate_against_a_silent_scheduler_times_out_with_one_line(simspad_cli, tmp_path, silent_listener):
+    address, accepted = silent_listener
+    spec = tmp_path / "spec.toml"
+    spec.write_text(SPEC.format(extra=""))
+    start = time.monotonic()
+    proc = simspad_cli.run("generate", spec, "--out", tmp_path / "out", "--executor", "dask", "--scheduler", address,
+                           "--yes", env={"SIMSPAD_DASK_CONNECT_TIMEOUT_S": "2"})
+    elapsed = time.monotonic() - start
+    line = _one_error_line(proc)
+    assert f"--scheduler: the Dask scheduler at {address} did not answer within 2 s" in line
+    assert "SIMSPAD_DASK_CONNECT_TIMEOUT_S" in line
+    assert accepted, "the probe never reached the listener"
+    assert elapsed < REFUSAL_S, elapsed
+
+
+def test_scheduler_probe_errors(monkeypatch):
+    from simspad.dataset.executors import check_scheduler_answers, dask_connect_timeout_s
+    from simspad.errors import SimSpadError
+
+    with socket.socket() as s:  # a port nothing listens on: refused, not "did not answer"
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(SimSpadError, match="nothing accepts connections"):
+        check_scheduler_answers(f"tcp://127.0.0.1:{port}", 1.0)
+    monkeypatch.delenv("SIMSPAD_DASK_CONNECT_TIMEOUT_S", raising=False)
+    assert dask_connect_timeout_s() == defaults.DASK_CONNECT_TIMEOUT_S
+    monkeypatch.setenv("SIMSPAD_DASK_CONNECT_TIMEOUT_S", "0.5")
+    assert dask_connect_timeout_s() == 0.5
+    for bad in ("soon", "-1", "nan", "inf"):
+        monkeypatch.setenv("SIMSPAD_DASK_CONNECT_TIMEOUT_S", bad)
+        with pytest.raises(SimSpadError, match="SIMSPAD_DASK_CONNECT_TIMEOUT_S"):
+            dask_connect_timeout_s()
