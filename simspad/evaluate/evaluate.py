@@ -61,7 +61,7 @@ from simspad.evaluate.recordings import (
     list_recordings,
     spec_evaluation,
 )
-from simspad.io.atomic import atomic_path
+from simspad.io.atomic import atomic_path, is_disk_full
 from simspad.io.reconstructions import ReconstructionSink
 from simspad.io.recording import open_recording
 from simspad.io.results_dir import (
@@ -77,6 +77,13 @@ from simspad.methods.registry import available_methods, get_method
 from simspad.physics.pairwise_sum import pairwise_sum
 
 MAX_WORKERS = 2
+
+
+class _QuietBar(tqdm):
+    """A progress bar without tqdm's monitor thread: bars shown before the pool starts must not make forking its
+    workers unsafe (:func:`_start_method`)."""
+
+    monitor_interval = 0
 
 
 class EvaluationFailed(SimSpadError):
@@ -162,6 +169,8 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
                                 "mtf": float(b)} for a, b in zip(f, m)]
         out["frame_rows"] = res["frame_rows"]
     except Exception as exc:  # a method's failure is a result, not the end of the run
+        if is_disk_full(exc):
+            raise  # the end of the run: one line naming the results directory (evaluate's atomic_path)
         row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
     return out
@@ -311,7 +320,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     out_dir = Path(out_dir)
     check_output_dir(out_dir)
     entries, manifest = list_recordings(Path(target), progress)
-    entries = [fill_entry(e) for e in tqdm(entries, desc="reading recordings", unit="rec", file=sys.stderr,
+    entries = [fill_entry(e) for e in _QuietBar(entries, desc="reading recordings", unit="rec", file=sys.stderr,
                                            delay=2.0, disable=not progress, leave=False)]
     check_unique_keys(entries)
     ev = spec_evaluation(manifest, entries[0])
@@ -326,7 +335,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
             get_method(m)  # unknown names are bad input: fail before doing anything
     tasks = []
     whites = {}
-    for e in tqdm(entries, desc="white points", unit="rec", file=sys.stderr, delay=2.0, disable=not progress,
+    for e in _QuietBar(entries, desc="white points", unit="rec", file=sys.stderr, delay=2.0, disable=not progress,
                   leave=False):
         with open_recording(e.path) as rec:
             idx = evaluation_indices(rec.gt.t, rate_hz)

@@ -22,6 +22,12 @@ from simspad.io.recording import open_recording
 from simspad.io.safe_paths import confined_path
 
 
+class _QuietBar(tqdm):
+    """A progress bar without tqdm's monitor thread (a thread makes forking evaluate's workers unsafe)."""
+
+    monitor_interval = 0
+
+
 @dataclass
 class RecordingEntry:
     """A recording to evaluate: its path and the key naming it in results and submissions."""
@@ -80,7 +86,7 @@ def _manifest_entries(target: Path, manifest: dict, progress: bool = False) -> l
                                "is listed once)", path=target / MANIFEST_NAME, field=f"recordings[{i}].path")
         listed.append((i, r, path))
     entries = []
-    for i, r, path in tqdm(listed, desc="checking hashes", unit="rec", file=sys.stderr, delay=2.0,
+    for i, r, path in _QuietBar(listed, desc="checking hashes", unit="rec", file=sys.stderr, delay=2.0,
                            disable=not progress, leave=False):
         problem = recording_mismatch(target, r)
         if problem:

@@ -13,7 +13,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from simspad.io.atomic import is_disk_full
 from simspad.io.compression import FLOAT_FRAMES_STORAGE
+from simspad.io.recording.writer import keep_after_disk_full
 
 #: Most bytes of frames held before they are written (memory does not grow with the sequence length).
 BUFFER_BYTES = 8 * 2**20
@@ -37,11 +39,15 @@ class ReconstructionSink:
     def __init__(self, path: Path, times_s: np.ndarray, shape: tuple[int, int], attrs: dict):
         path.parent.mkdir(parents=True, exist_ok=True)
         self.h5 = h5py.File(path, "w")
-        self.h5.create_dataset("t", data=np.asarray(times_s, np.float64), track_times=False)
-        self.ds = self.h5.create_dataset("flux", shape=(len(times_s), *shape), dtype=np.float32,
-                                         chunks=(1, *shape), track_times=False, **FLOAT_FRAMES_STORAGE)
-        for k, v in attrs.items():
-            self.h5.attrs[k] = v
+        try:
+            self.h5.create_dataset("t", data=np.asarray(times_s, np.float64), track_times=False)
+            self.ds = self.h5.create_dataset("flux", shape=(len(times_s), *shape), dtype=np.float32,
+                                             chunks=(1, *shape), track_times=False, **FLOAT_FRAMES_STORAGE)
+            for k, v in attrs.items():
+                self.h5.attrs[k] = v
+        except BaseException as exc:
+            self._failed(exc)
+            raise
         frame_bytes = max(1, int(np.prod(shape)) * 4)
         self._buffer = np.empty((max(1, min(len(times_s), BUFFER_BYTES // frame_bytes)), *shape), np.float32)
         self._first = 0  # index of the frame in _buffer[0]
@@ -59,11 +65,25 @@ class ReconstructionSink:
     def flush(self) -> None:
         """Write the frames held."""
         if self._held:
-            self.ds[self._first:self._first + self._held] = self._buffer[:self._held]
+            try:
+                self.ds[self._first:self._first + self._held] = self._buffer[:self._held]
+            except BaseException as exc:
+                self._failed(exc)
+                raise
             self._held = 0
 
     def close(self) -> None:
         try:
             self.flush()
         finally:
-            self.h5.close()
+            try:
+                self.h5.close()
+            except BaseException as exc:
+                self._failed(exc)
+                raise
+
+    def _failed(self, exc: BaseException) -> None:
+        """On a full disk, keep the file object alive (freeing it would crash HDF5: see
+        :func:`simspad.io.recording.writer.keep_after_disk_full`)."""
+        if is_disk_full(exc):
+            keep_after_disk_full(self)  # the file and its dataset object
