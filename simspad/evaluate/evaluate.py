@@ -54,14 +54,8 @@ from simspad.evaluate.protocol import (
     score_frames,
     star_figures,
 )
-from simspad.evaluate.recordings import (
-    RecordingEntry,
-    check_unique_keys,
-    fill_entry,
-    list_recordings,
-    spec_evaluation,
-)
-from simspad.io.atomic import atomic_path, is_disk_full
+from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
+from simspad.io.atomic import atomic_path
 from simspad.io.reconstructions import ReconstructionSink
 from simspad.io.recording import open_recording
 from simspad.io.results_dir import (
@@ -75,15 +69,10 @@ from simspad.io.results_dir import (
 from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, get_method
 from simspad.physics.pairwise_sum import pairwise_sum
+from simspad.evaluate.recordings import QuietBar, fill_entries
+from simspad.io.atomic import is_disk_full
 
 MAX_WORKERS = 2
-
-
-class _QuietBar(tqdm):
-    """A progress bar without tqdm's monitor thread: bars shown before the pool starts must not make forking its
-    workers unsafe (:func:`_start_method`)."""
-
-    monitor_interval = 0
 
 
 class EvaluationFailed(SimSpadError):
@@ -319,10 +308,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
         raise SimSpadError("an output directory is required", field="--out")
     out_dir = Path(out_dir)
     check_output_dir(out_dir)
-    entries, manifest = list_recordings(Path(target), progress)
-    entries = [fill_entry(e) for e in _QuietBar(entries, desc="reading recordings", unit="rec", file=sys.stderr,
-                                           delay=2.0, disable=not progress, leave=False)]
-    check_unique_keys(entries)
+    entries, manifest = list_recordings(Path(target))
+    entries = fill_entries(entries, progress)
     ev = spec_evaluation(manifest, entries[0])
     if rate_hz is None:
         rate_hz = float(ev.get("rate_hz", DEFAULT_RATE_HZ) or DEFAULT_RATE_HZ)
@@ -335,8 +322,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
             get_method(m)  # unknown names are bad input: fail before doing anything
     tasks = []
     whites = {}
-    for e in _QuietBar(entries, desc="white points", unit="rec", file=sys.stderr, delay=2.0, disable=not progress,
-                  leave=False):
+    for e in QuietBar(entries, desc="white points", unit="rec", file=sys.stderr, delay=2.0, disable=not progress,
+                      leave=False):
         with open_recording(e.path) as rec:
             idx = evaluation_indices(rec.gt.t, rate_hz)
             if idx.size == 0:

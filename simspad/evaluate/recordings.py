@@ -22,8 +22,9 @@ from simspad.io.recording import open_recording
 from simspad.io.safe_paths import confined_path
 
 
-class _QuietBar(tqdm):
-    """A progress bar without tqdm's monitor thread (a thread makes forking evaluate's workers unsafe)."""
+class QuietBar(tqdm):
+    """A progress bar without tqdm's monitor thread: bars shown before evaluate's pool starts must not make
+    forking its workers unsafe (:func:`simspad.evaluate.evaluate._start_method`)."""
 
     monitor_interval = 0
 
@@ -53,7 +54,7 @@ def read_manifest(dataset_dir: Path) -> dict | None:
     return read_dataset_manifest(dataset_dir)
 
 
-def list_recordings(target: Path, progress: bool = False) -> tuple[list[RecordingEntry], dict | None]:
+def list_recordings(target: Path, progress: bool = True) -> tuple[list[RecordingEntry], dict | None]:
     """The recordings of ``target`` (a ``.h5`` file, a dataset directory with ``manifest.json``, or a
     directory of ``.h5`` files) and the manifest (or None). Manifest entries whose status is not
     ``complete`` are skipped; one listed twice is refused. ``progress``: a bar on stderr while the manifest's
@@ -86,7 +87,7 @@ def _manifest_entries(target: Path, manifest: dict, progress: bool = False) -> l
                                "is listed once)", path=target / MANIFEST_NAME, field=f"recordings[{i}].path")
         listed.append((i, r, path))
     entries = []
-    for i, r, path in _QuietBar(listed, desc="checking hashes", unit="rec", file=sys.stderr, delay=2.0,
+    for i, r, path in QuietBar(listed, desc="checking hashes", unit="rec", file=sys.stderr, delay=2.0,
                            disable=not progress, leave=False):
         problem = recording_mismatch(target, r)
         if problem:
@@ -121,6 +122,14 @@ def _attr_float(attrs, name: str, default: float, path: Path) -> float:
     except (TypeError, ValueError):
         raise SimSpadError(f"expected a number, got {attrs[name]!r}", path=path, field=f"/ (attribute {name})") \
             from None
+
+
+def fill_entries(entries: list[RecordingEntry], progress: bool = True) -> list[RecordingEntry]:
+    """:func:`fill_entry` each (a bar on stderr once that takes more than 2 s), then :func:`check_unique_keys`."""
+    entries = [fill_entry(e) for e in QuietBar(entries, desc="reading recordings", unit="rec", file=sys.stderr,
+                                               delay=2.0, disable=not progress, leave=False)]
+    check_unique_keys(entries)
+    return entries
 
 
 def check_unique_keys(entries: list[RecordingEntry]) -> None:

@@ -69,7 +69,7 @@ def write_csv(path: Path, columns, rows) -> None:
 
 def _parse(col: str, v: str):
     if col in ("method", "label", "sensors", "scene", "sequence", "recording", "image", "error"):
-        return csv_unescape(v)
+        return v
     if col == "absolute_scale":
         return v.strip().lower() in ("true", "1", "yes")
     if col in ("n_frames", "frame"):
@@ -94,7 +94,7 @@ def read_csv(path: Path) -> list[dict]:
                 if len(rows) >= limit:
                     raise InputError(f"more than {defaults.MAX_RESULTS_ROWS} rows, the limit of one results "
                                      "table (set SIMSPAD_IGNORE_LIMITS=1 to try anyway)", path=path)
-                rows.append({k: _parse(k, v) for k, v in row.items()})
+                rows.append({k: _parse(k, csv_unescape(v)) for k, v in row.items()})
     except (csv.Error, UnicodeDecodeError) as exc:
         raise InputError(f"not a readable results CSV ({str(exc)[:120]})", path=path) from None
     checked = set()

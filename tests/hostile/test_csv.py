@@ -76,7 +76,7 @@ def test_leaderboard_does_not_follow_a_results_csv_linked_out_of_its_folder(sims
         assert proc.returncode == 2, proc.stderr[-2000:]
         line = proc.stderr.strip()
         assert line.count("\n") == 0 and "results.csv" in line and "outside" in line and "internal" not in line
-        assert not (tmp_path / "board").exists()
+        assert not (tmp_path / "board" / "leaderboard.html").exists()
     # a link that stays inside the results directory is fine
     (res / "results.csv").unlink()
     shutil.copy(outside, res / "real.csv")

@@ -29,8 +29,8 @@ def build_leaderboard(results_dirs, out_dir=None) -> Path:
     results_dirs = [Path(d) for d in results_dirs]
     if not results_dirs:
         raise SimSpadError("at least one results directory is required", field="RESULTS_DIR")
-    board = build_board(results_dirs)  # inputs checked before the output folder is made
     out_dir = ensure_writable_dir(Path(out_dir) if out_dir is not None else results_dirs[0])
+    board = build_board(results_dirs)
     plots = {"PSNR versus lux": plot_psnr_vs_lux(board), "PSNR versus bandwidth": plot_psnr_vs_bandwidth(board)}
     plot_files = {}
     for name, png in plots.items():

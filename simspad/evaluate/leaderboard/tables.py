@@ -10,7 +10,7 @@ import csv
 from pathlib import Path
 
 from simspad.evaluate.metrics import STAR_FREQS_CYC_PX
-from simspad.io.csv_cells import csv_safe
+from simspad.io import csv_cells
 from simspad.evaluate.leaderboard.board import (
     Board,
     best_of,
@@ -127,6 +127,13 @@ MTF_NOTE = ("Siemens star: the reconstruction's contrast relative to the ground 
             "measured. – = not measurable: a frequency below the lowest the star's outer circle carries at this "
             "resolution (n cycles / (2π × radius)), an MTF50 that is not reached by Nyquist or already passed at "
             "the lowest measured frequency, or a failed run.")
+
+
+def csv_safe(value):
+    """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR first) gets a
+    leading apostrophe (the OWASP rule); numbers pass unchanged: :func:`simspad.io.csv_cells.csv_safe`, the one
+    rule of every CSV SimSPAD writes."""
+    return csv_cells.csv_safe(value)
 
 
 def write_csv_table(path: Path, board: Board) -> None:
