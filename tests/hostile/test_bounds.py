@@ -189,7 +189,7 @@ def test_leaderboard_of_20001_rows_is_refused_with_the_figure(simspad_cli, score
     assert time.monotonic() - start < REFUSAL_S
     line = _one_error_line(proc)
     assert figure in line and "SIMSPAD_IGNORE_LIMITS=1" in line and "results.csv" in line
-    assert not (tmp_path / "board").exists()
+    assert not (tmp_path / "board" / "leaderboard.html").exists()
 
 
 def test_results_table_rows_are_bounded_while_reading(scored_results, tmp_path, monkeypatch):
