@@ -34,6 +34,7 @@ the parameter checks and the sensor's photocurrent.
 
 from __future__ import annotations
 
+import math
 import os
 from typing import NamedTuple
 
@@ -114,7 +115,7 @@ def noise_rates_hz(params: EventParams, lux: float, mean_ratio: float | None = N
     """
     exponent = params.shot_noise_current_exponent
     if mean_ratio is None:
-        mean_ratio = min(1.0, float(lux) ** -exponent) if lux > 0 else 1.0
+        mean_ratio = math.exp(min(0.0, -exponent * math.log(lux))) if lux > 0 else 1.0  # min(1, lux^−γ)
     return params.shot_noise_rate_hz_at_1lux * mean_ratio, params.hot_pixel_fraction * params.hot_pixel_rate_hz
 
 
