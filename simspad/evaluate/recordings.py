@@ -3,7 +3,10 @@
 
 The manifest is read by :func:`simspad.io.manifest.read_manifest` (the one reader, as ``generate`` uses), every
 path in it is confined to the dataset folder, and each complete recording's size and sha256 are verified
-against the manifest before it is scored.
+against the manifest before it is scored. A recording the manifest lists twice is refused before any hash is
+computed, two recordings with one key (their results would overwrite each other) once their attributes are read,
+and a folder's ``.h5`` linked out of the folder is not read. Reading many recordings shows a progress bar on
+stderr after 2 s (:class:`QuietBar`: no monitor thread, so evaluate's workers can still be forked).
 """
 
 from __future__ import annotations

@@ -3,7 +3,9 @@
 Layout: ``/t`` [N] float64 s, ``/flux`` [N,H,W] float32 ph s⁻¹ m⁻² (one chunk per frame, byte shuffle + Zstandard:
 :data:`simspad.io.compression.FLOAT_FRAMES_STORAGE`; an outside reader imports ``hdf5plugin`` first), root
 attributes ``method``, ``recording``, ``units``. Frames are written as the method produces them, a few at a
-time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same).
+time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same). A write or
+close that fails on a full disk keeps the sink alive (:func:`simspad.io.recording.writer.keep_after_disk_full`):
+freeing its HDF5 objects would crash the process.
 """
 
 from __future__ import annotations

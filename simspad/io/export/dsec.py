@@ -12,7 +12,8 @@ Layout (DSEC, Gehrig et al. 2021)::
 ``t_offset`` is the recording's start rounded down to a whole millisecond, so ``t`` starts near 0 as in DSEC and
 ``t + t_offset`` is the recording's own time base (µs since the timeline's t = 0). ``ms_to_idx`` is recomputed
 while the events stream through (from the offset, not copied), which also checks that the events are sorted.
-The same recording always gives the same bytes. Datasets are gzip-compressed with h5py's built-in filter (DSEC's files use Blosc through ``hdf5plugin``; gzip
+The same recording always gives the same bytes. A full disk ends the export with one line: the HDF5 objects whose
+write failed are kept alive, not freed (which would crash the process). Datasets are gzip-compressed with h5py's built-in filter (DSEC's files use Blosc through ``hdf5plugin``; gzip
 needs no plugin on the reading side).
 """
 

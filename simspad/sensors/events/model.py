@@ -29,7 +29,8 @@ Per pixel (flattened index ``y·W + x``):
   crossing that falls in that window fires when the window ends (if the change still exceeds the threshold).
 
 This module holds what the parameters alone determine: the event labels, the fixed pattern (:class:`PixelMaps`),
-the parameter checks and the sensor's photocurrent.
+the parameter checks, the sensor's photocurrent and the bound on the noise processes' work
+(:func:`noise_work_problem`).
 """
 
 from __future__ import annotations
