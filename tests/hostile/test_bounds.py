@@ -21,7 +21,12 @@ import pytest
 
 from simspad import defaults
 from simspad.io.render_dir import write_render_dir
-from simspad.sensors.events.model import mean_shot_noise_ratio, noise_rates_hz, noise_work_problem
+from simspad.sensors.events.model import (
+    leak_event_rate_hz,
+    mean_shot_noise_ratio,
+    noise_rates_hz,
+    noise_work_problem,
+)
 from simspad.sensors.events.model import sensor_current_1lux_e_s, sensor_photocurrent_e_s
 from simspad.sensors.presets import sensor_params
 
@@ -117,7 +122,7 @@ def test_spec_with_exploding_event_work_is_refused_before_estimating(simspad_cli
 def test_noise_work_figure_is_pixels_times_seconds_times_rate(monkeypatch):
     monkeypatch.delenv("SIMSPAD_IGNORE_LIMITS", raising=False)
     params = sensor_params("events", None, {"shot_noise_rate_hz_at_1lux": 1e9, "hot_pixel_fraction": 0.5,
-                                            "hot_pixel_rate_hz": 2e8})
+                                            "hot_pixel_rate_hz": 2e8, "leak_rate_hz": 0.0})
     # at 1 lx the bound's ratio is 1: 1e9 shot + 0.5 × 2e8 hot = 1.1e9 per pixel-second
     assert noise_rates_hz(params, 1.0) == (1e9, 1e8)
     message = noise_work_problem(params, 1000, 0.5, 1.0)
@@ -125,6 +130,13 @@ def test_noise_work_figure_is_pixels_times_seconds_times_rate(monkeypatch):
     assert noise_work_problem(params, 10, 0.5, 1.0) is None  # 5.5e9: under the bound
     # brighter than 1 lx the mean pixel's current grows with the light: r₁·lux^−γ
     assert noise_rates_hz(params, 100.0)[0] == pytest.approx(1e9 * 100 ** -0.5)
+    # leak events: half the pixels leak at least the median rate, at most once per refractory period (+1 ns)
+    leaky = sensor_params("events", None, {"leak_rate_hz": 1e12, "refractory_s": 0.0, "latency_s": 0.0,
+                                           "jitter_s": 0.0})
+    assert leak_event_rate_hz(leaky) == pytest.approx(0.5e9)
+    assert "leak ≥ 5e+08 Hz" in noise_work_problem(leaky, 100, 1.0, 1.0)
+    # the default readout (50 µs latency, 100 µs refractory) caps a pixel near 7 kHz: 1e12 Hz of leak is bounded
+    assert noise_work_problem(sensor_params("events", None, {"leak_rate_hz": 1e12}), 100, 1.0, 1.0) is None
     monkeypatch.setenv("SIMSPAD_IGNORE_LIMITS", "1")
     assert noise_work_problem(params, 1000, 0.5, 1.0) is None
 

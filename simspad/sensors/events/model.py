@@ -126,33 +126,47 @@ def mean_shot_noise_ratio(current_e_s: np.ndarray, current_1lux: float, params: 
     return float(np.mean(rate, dtype=np.float64))
 
 
+def leak_event_rate_hz(params: EventParams) -> float:
+    """Leak events per pixel-second, a lower bound: half the pixels leak at least the median rate (log-normal
+    spread), and a pixel is blind from detection until ``refractory_s`` after its readout (latency plus jitter,
+    taken at 4 σ, plus the kernel's 1 ns guard)."""
+    blind_s = max(params.refractory_s, 0.0) + max(params.latency_s + 4 * params.jitter_s, 0.0) + 1e-9
+    return 0.5 * min(params.leak_rate_hz, 1.0 / blind_s)
+
+
 def noise_work_problem(params: EventParams, n_pixels: int, duration_s: float, lux: float,
                        mean_ratio: float | None = None) -> str | None:
-    """Why the noise processes of ``n_pixels`` over ``duration_s`` would take too many draws, or None.
+    """Why the noise processes of ``n_pixels`` over ``duration_s`` would take too much work, or None.
 
-    The kernel draws a hazard for every noise event, even while the pixel is blind after an event (the
-    refractory period caps the events written, not the work), so the work is pixels × seconds × rate, refused
-    above :data:`~simspad.defaults.MAX_EVENT_NOISE_DRAWS` (``SIMSPAD_IGNORE_LIMITS=1`` lifts it).
+    The kernel draws a hazard for every shot-noise and hot-pixel event, even while the pixel is blind after an
+    event (the refractory period caps the events written, not these draws), and writes every leak event, so the
+    work is pixels × seconds × rate, refused above :data:`~simspad.defaults.MAX_EVENT_NOISE_DRAWS`
+    (``SIMSPAD_IGNORE_LIMITS=1`` lifts it).
     """
     if os.environ.get("SIMSPAD_IGNORE_LIMITS", "") == "1":
         return None
     shot_hz, hot_hz = noise_rates_hz(params, lux, mean_ratio)
-    draws = float(n_pixels) * float(duration_s) * (shot_hz + hot_hz)
-    if not draws > defaults.MAX_EVENT_NOISE_DRAWS:
+    leak_hz = leak_event_rate_hz(params)
+    rate_hz = shot_hz + hot_hz + leak_hz
+    work = float(n_pixels) * float(duration_s) * rate_hz
+    if not work > defaults.MAX_EVENT_NOISE_DRAWS:
         return None
     shot = (f"{shot_hz:.3g} Hz at the first keyframe" if mean_ratio is not None
             else f"≥ {shot_hz:.3g} Hz at the scene's mean luminance")
-    return (f"{n_pixels} pixels × {duration_s:g} s × {shot_hz + hot_hz:.3g} noise events per pixel-second (shot "
-            f"noise {shot} at {lux:g} lx; hot pixels {hot_hz:.3g} Hz on average) is "
-            f"{draws:.3g} random draws, above the limit of {defaults.MAX_EVENT_NOISE_DRAWS:.3g} (~"
-            f"{draws * 20e-9 / 3600:.3g} CPU-hours; the refractory period caps the events, not this work): lower "
-            "shot_noise_rate_hz_at_1lux or hot_pixel_rate_hz, or set SIMSPAD_IGNORE_LIMITS=1 to try anyway")
+    return (f"{n_pixels} pixels × {duration_s:g} s × {rate_hz:.3g} noise events per pixel-second (shot noise "
+            f"{shot} at {lux:g} lx; hot pixels {hot_hz:.3g} Hz on average; leak ≥ {leak_hz:.3g} Hz) is "
+            f"{work:.3g} random draws, above the limit of {defaults.MAX_EVENT_NOISE_DRAWS:.3g} (~"
+            f"{work * 20e-9 / 3600:.3g} CPU-hours; the refractory period caps the events, not this work): lower "
+            "shot_noise_rate_hz_at_1lux, hot_pixel_rate_hz or leak_rate_hz, or set SIMSPAD_IGNORE_LIMITS=1 to try "
+            "anyway")
 
 
 def noise_field(params: EventParams, lux: float) -> str:
     """The parameter that contributes most of the noise work (for a message's field)."""
     shot_hz, hot_hz = noise_rates_hz(params, lux)
-    return f"{_FIELD}.{'shot_noise_rate_hz_at_1lux' if shot_hz >= hot_hz else 'hot_pixel_rate_hz'}"
+    rates = {"shot_noise_rate_hz_at_1lux": shot_hz, "hot_pixel_rate_hz": hot_hz,
+             "leak_rate_hz": leak_event_rate_hz(params)}
+    return f"{_FIELD}.{max(rates, key=rates.get)}"
 
 
 def sensor_photocurrent_e_s(flux_ph_s_m2, params: EventParams, out: np.ndarray | None = None) -> np.ndarray:
