@@ -46,3 +46,21 @@ MAX_RATE_HZ = 1e6
 #: Largest |time| (s) and |position| (m) of a trajectory keyframe: beyond, a unit slip or garbage (±1e308).
 MAX_TRAJECTORY_TIME_S = 1e10  # TUM files carry Unix times (~1.7e9 s)
 MAX_TRAJECTORY_POSITION_M = 1e6
+#: Most noise-process draws (shot-noise and hot-pixel hazards) an event simulation may take: pixels × seconds ×
+#: noise rate per pixel. Each costs ~20 ns of one core even while the pixel is blind (the refractory period caps
+#: the events, not the draws), so 1e10 is ~3 min of CPU; the defaults draw ~1 per pixel-second.
+MAX_EVENT_NOISE_DRAWS = 1e10
+#: Smallest event ``substep_tolerance`` (a floor, kept under SIMSPAD_IGNORE_LIMITS): each tenfold cut costs ~3×
+#: the internal steps, and crossings have converged at 1e-5 (benchmarks/bench_events.py's reference); 1e-6 is
+#: already ~100× the default's steps, 1e-12 would be ~10⁵×.
+MIN_SUBSTEP_TOLERANCE = 1e-6
+#: Most rows of a results.csv the leaderboard reads (methods × recordings; reading and merging take ~0.3 ms a row).
+MAX_RESULTS_ROWS = 200_000
+#: Most methods one leaderboard shows: each is a line of every plot and a heatmap panel (~0.5 s of CPU each).
+MAX_LEADERBOARD_METHODS = 50
+#: Most table columns (scene × speed × lux) and light-level × speed cells of one leaderboard's regime map.
+MAX_LEADERBOARD_COLUMNS = 1000
+MAX_LEADERBOARD_REGIME_CELLS = 400
+#: Seconds `generate --executor dask --scheduler ADDRESS` waits for the scheduler to answer (connection and
+#: handshake); the environment variable SIMSPAD_DASK_CONNECT_TIMEOUT_S overrides it.
+DASK_CONNECT_TIMEOUT_S = 15.0

@@ -22,6 +22,7 @@ import os
 import signal
 import socket
 import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass
@@ -384,6 +385,68 @@ class LocalExecutor:
             pool.shutdown(wait=not cancel, cancel_futures=cancel)
 
 
+def dask_connect_timeout_s() -> float:
+    """Seconds to wait for a Dask scheduler: ``SIMSPAD_DASK_CONNECT_TIMEOUT_S``, else
+    :data:`~simspad.defaults.DASK_CONNECT_TIMEOUT_S`."""
+    text = os.environ.get("SIMSPAD_DASK_CONNECT_TIMEOUT_S", "").strip()
+    if not text:
+        return defaults.DASK_CONNECT_TIMEOUT_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < 1e6:
+        raise SimSpadError(f"expected a number of seconds > 0, got {text!r}", field="SIMSPAD_DASK_CONNECT_TIMEOUT_S")
+    return value
+
+
+def check_scheduler_answers(address: str, timeout_s: float) -> None:
+    """Connect to the Dask scheduler at ``address`` and complete distributed's handshake within ``timeout_s``, or
+    raise one :class:`SimSpadError`.
+
+    ``distributed.Client(…, timeout=…)`` bounds the TCP connection but not the handshake after it: a listener
+    that accepts and never speaks (a wrong port, a proxy, a hung scheduler) kept `generate` waiting forever with
+    no output. A scheduler sends its handshake as soon as it accepts, so waiting for it is the whole check.
+    """
+    import asyncio  # deferred: only this check runs an event loop of its own
+
+    from distributed.comm import connect  # deferred: dask is needed only by --executor dask
+
+    async def handshake():
+        comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s)
+        await comm.close()
+
+    outcome: list[BaseException | None] = []
+
+    def run():  # a thread of its own: the caller may already run an event loop (a notebook)
+        try:
+            asyncio.run(handshake())
+            outcome.append(None)
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            outcome.append(exc)
+
+    worker = threading.Thread(target=run, name="simspad-dask-probe", daemon=True)
+    worker.start()
+    worker.join(timeout_s + 5.0)
+    exc = outcome[0] if outcome else TimeoutError()
+    if exc is None:
+        return
+    cause, refused = exc, False
+    while cause is not None and not refused:
+        refused = isinstance(cause, ConnectionRefusedError)
+        cause = cause.__cause__ or cause.__context__
+    if refused:
+        raise SimSpadError(f"nothing accepts connections at {address} (refused for {timeout_s:g} s): is the Dask "
+                           "scheduler running, and is this its address?", field="--scheduler")
+    if isinstance(exc, (TimeoutError, asyncio.TimeoutError)) or "timed out" in str(exc).lower():
+        raise SimSpadError(f"the Dask scheduler at {address} did not answer within {timeout_s:g} s (is it a Dask "
+                           "scheduler, and reachable? SIMSPAD_DASK_CONNECT_TIMEOUT_S=SECONDS waits longer)",
+                           field="--scheduler")
+    if isinstance(exc, (OSError, ValueError, TypeError)):
+        raise SimSpadError(f"cannot connect to the Dask scheduler at {address} ({exc})", field="--scheduler")
+    raise exc
+
+
 class DaskExecutor:
     """dask.distributed: join a running scheduler (``scheduler`` address) or start a LocalCluster.
 
@@ -405,8 +468,10 @@ class DaskExecutor:
         self.env = env
         self._cluster = None
         if scheduler:
+            timeout_s = dask_connect_timeout_s()
+            check_scheduler_answers(scheduler, timeout_s)
             try:
-                self.client = Client(scheduler, timeout="15s")
+                self.client = Client(scheduler, timeout=f"{timeout_s}s")
             except (OSError, TimeoutError) as exc:
                 raise SimSpadError(f"cannot connect to the Dask scheduler ({exc})", field="--scheduler") from None
         else:

@@ -3,8 +3,9 @@
 Per-field type checks live in :mod:`simspad.dataset.spec_validation`; this module adds what needs several fields
 or a bound with a figure: each sequence's render size, samples and keyframe count
 (:func:`simspad.render.settings.render_limit_problems`), every sensor's model checks at the sequence's size
-(the same ones the simulators run, so nothing fails after rendering), the lux range, and the number of frames,
-SPAD bins and ground-truth instants of each recording (at least one, at most
+(the same ones the simulators run, so nothing fails after rendering), the lux range, the event camera's noise
+work (:func:`simspad.sensors.events.model.noise_work_problem`, a lower bound whatever the scene), and the number
+of frames, SPAD bins and ground-truth instants of each recording (at least one, at most
 :data:`~simspad.defaults.MAX_SAMPLES_PER_RECORDING`).
 """
 
@@ -44,6 +45,12 @@ def spec_limit_problems(spec) -> list[tuple[str, str]]:
         if "frames" in spec.sensors:
             out += _model_problems(frames_model.validate_params, spec.sensors["frames"].params, h)
         out += _count_problems(spec, seq, where)
+        if "events" in spec.sensors:
+            params = spec.sensors["events"].params
+            for lux in spec.lux:
+                problem = events_model.noise_work_problem(params, w * h, seq.duration_s, lux)
+                if problem:
+                    out.append((events_model.noise_field(params, lux), f"{where}: {problem}"))
     return list(dict.fromkeys(out))  # a sensor problem found for every sequence is reported once
 
 

@@ -78,6 +78,8 @@ from simspad.io.results_dir import (
 from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, check_method_params, get_method
 from simspad.physics.pairwise_sum import pairwise_sum
+from simspad.evaluate.recordings import QuietBar, fill_entries
+from simspad.io.atomic import is_disk_full
 
 MAX_WORKERS = 2
 
@@ -175,6 +177,8 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
                                 "mtf": float(b)} for a, b in zip(f, m)]
         out["frame_rows"] = res["frame_rows"]
     except Exception as exc:  # a method's failure is a result, not the end of the run
+        if is_disk_full(exc):
+            raise  # the end of the run: one line naming the results directory (evaluate's atomic_path)
         row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
     return out
@@ -378,7 +382,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
     out_dir = Path(out_dir)
     check_output_dir(out_dir, "evaluate")
     entries, manifest = list_recordings(Path(target))
-    entries = [fill_entry(e) for e in entries]
+    entries = fill_entries(entries, progress)
     ev = spec_evaluation(manifest, entries[0])
     if rate_hz is None:
         rate_hz = float(ev.get("rate_hz", DEFAULT_RATE_HZ) or DEFAULT_RATE_HZ)
@@ -393,7 +397,8 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                                    if manifest else None)
     tasks = []
     whites = {}
-    for e in entries:
+    for e in QuietBar(entries, desc="white points", unit="rec", file=sys.stderr, delay=2.0, disable=not progress,
+                      leave=False):
         with open_recording(e.path) as rec:
             names = list(methods) if methods else available_methods(rec)
             if not rec.has("gt"):  # a real capture (simspad import): scored without ground truth

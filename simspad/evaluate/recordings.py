@@ -3,13 +3,19 @@
 
 The manifest is read by :func:`simspad.io.manifest.read_manifest` (the one reader, as ``generate`` uses), every
 path in it is confined to the dataset folder, and each complete recording's size and sha256 are verified
-against the manifest before it is scored.
+against the manifest before it is scored. A recording the manifest lists twice is refused before any hash is
+computed, two recordings with one key (their results would overwrite each other) once their attributes are read,
+and a folder's ``.h5`` linked out of the folder is not read. Reading many recordings shows a progress bar on
+stderr after 2 s (:class:`QuietBar`: no monitor thread, so evaluate's workers can still be forked).
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from tqdm import tqdm
 
 from simspad.errors import SimSpadError
 from simspad.io.manifest import MANIFEST_NAME, recording_mismatch
@@ -17,6 +23,13 @@ from simspad.io.manifest import read_manifest as read_dataset_manifest
 from simspad.io.names import recording_key
 from simspad.io.recording import open_recording
 from simspad.io.safe_paths import confined_path
+
+
+class QuietBar(tqdm):
+    """A progress bar without tqdm's monitor thread: bars shown before evaluate's pool starts must not make
+    forking its workers unsafe (:func:`simspad.evaluate.evaluate._start_method`)."""
+
+    monitor_interval = 0
 
 
 @dataclass
@@ -46,31 +59,41 @@ def read_manifest(dataset_dir: Path) -> dict | None:
     return read_dataset_manifest(dataset_dir)
 
 
-def list_recordings(target: Path) -> tuple[list[RecordingEntry], dict | None]:
+def list_recordings(target: Path, progress: bool = True) -> tuple[list[RecordingEntry], dict | None]:
     """The recordings of ``target`` (a ``.h5`` file, a dataset directory with ``manifest.json``, or a
     directory of ``.h5`` files) and the manifest (or None). Manifest entries whose status is not
-    ``complete`` are skipped."""
+    ``complete`` are skipped; one listed twice is refused. ``progress``: a bar on stderr while the manifest's
+    hashes are checked, once that takes more than 2 s."""
     target = Path(target)
     if target.is_file():
         return [RecordingEntry(target, target.name)], None
     if not target.is_dir():
         raise SimSpadError("no such recording file or dataset directory", path=target)
     manifest = read_manifest(target)
-    entries = _manifest_entries(target, manifest) if manifest is not None else _found_entries(target)
+    entries = _manifest_entries(target, manifest, progress) if manifest is not None else _found_entries(target)
     if not entries:
         raise SimSpadError("no complete recordings to evaluate", path=target)
     return entries, manifest
 
 
-def _manifest_entries(target: Path, manifest: dict) -> list[RecordingEntry]:
-    entries = []
-    for i, r in enumerate(manifest["recordings"]):
+def _manifest_entries(target: Path, manifest: dict, progress: bool = False) -> list[RecordingEntry]:
+    listed: list[tuple[int, dict, Path]] = []
+    seen: dict[Path, int] = {}
+    for i, r in enumerate(manifest["recordings"]):  # every path checked, and duplicates refused, before hashing
         if not isinstance(r, dict) or not isinstance(r.get("path"), str):
             raise SimSpadError("each recording needs a 'path' string", path=target / MANIFEST_NAME,
                                field=f"recordings[{i}].path")
         if r.get("status", "complete") != "complete":
             continue
         path = confined_path(target, r["path"], source=target / MANIFEST_NAME, field=f"recordings[{i}].path")
+        first = seen.setdefault(path.resolve(), i)
+        if first != i:
+            raise SimSpadError(f"{r['path']!r} is the recording recordings[{first}] already lists (each recording "
+                               "is listed once)", path=target / MANIFEST_NAME, field=f"recordings[{i}].path")
+        listed.append((i, r, path))
+    entries = []
+    for i, r, path in QuietBar(listed, desc="checking hashes", unit="rec", file=sys.stderr, delay=2.0,
+                           disable=not progress, leave=False):
         problem = recording_mismatch(target, r)
         if problem:
             raise SimSpadError(f"{problem}: changed or corrupt since it was generated (re-run simspad generate to "
@@ -89,7 +112,9 @@ def _found_entries(target: Path) -> list[RecordingEntry]:
             continue  # temporary files of atomic writes
         if any(parent in results_dirs for parent in p.parents) or "renders" in parts[:-1]:
             continue  # saved reconstructions of an earlier evaluation, render caches
-        entries.append(RecordingEntry(p, p.relative_to(target).as_posix()))
+        rel = p.relative_to(target).as_posix()
+        confined_path(target, rel, source=target, field="recording")  # a link out of the folder is not read
+        entries.append(RecordingEntry(p, rel))
     return entries
 
 
@@ -102,6 +127,25 @@ def _attr_float(attrs, name: str, default: float, path: Path) -> float:
     except (TypeError, ValueError):
         raise SimSpadError(f"expected a number, got {attrs[name]!r}", path=path, field=f"/ (attribute {name})") \
             from None
+
+
+def fill_entries(entries: list[RecordingEntry], progress: bool = True) -> list[RecordingEntry]:
+    """:func:`fill_entry` each (a bar on stderr once that takes more than 2 s), then :func:`check_unique_keys`."""
+    entries = [fill_entry(e) for e in QuietBar(entries, desc="reading recordings", unit="rec", file=sys.stderr,
+                                               delay=2.0, disable=not progress, leave=False)]
+    check_unique_keys(entries)
+    return entries
+
+
+def check_unique_keys(entries: list[RecordingEntry]) -> None:
+    """Refuse two recordings with one key (sequence, lux, speed): their images and reconstructions would
+    overwrite each other in the results directory."""
+    seen: dict[str, RecordingEntry] = {}
+    for e in entries:
+        other = seen.setdefault(e.key, e)
+        if other is not e:
+            raise SimSpadError(f"has the key {e.key!r} (sequence, lux, speed) of {other.path} too: their results "
+                               "would overwrite each other (evaluate them separately)", path=e.path)
 
 
 def fill_entry(entry: RecordingEntry) -> RecordingEntry:

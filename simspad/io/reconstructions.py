@@ -3,7 +3,9 @@
 Layout: ``/t`` [N] float64 s, ``/flux`` [N,H,W] float32 ph s⁻¹ m⁻² (one chunk per frame, byte shuffle + Zstandard:
 :data:`simspad.io.compression.FLOAT_FRAMES_STORAGE`; an outside reader imports ``hdf5plugin`` first), root
 attributes ``method``, ``recording``, ``units``. Frames are written as the method produces them, a few at a
-time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same).
+time (one HDF5 write per run of frames costs less than one per frame; the file's bytes are the same). A write or
+close that fails on a full disk keeps the sink alive (:func:`simspad.io.recording.writer.keep_after_disk_full`):
+freeing its HDF5 objects would crash the process.
 
 :func:`open_reconstruction` reads one back, validated like every input (attributes are strings, ``/t`` finite
 and increasing, ``/flux`` float32 ``[N, H, W]``, finite and ≥ 0, checked a few frames at a time): a damaged or
@@ -20,8 +22,10 @@ import numpy as np
 
 from simspad import defaults
 from simspad.errors import InputError
+from simspad.io.atomic import is_disk_full
 from simspad.io.compression import FLOAT_FRAMES_STORAGE
 from simspad.io.hdf5 import decode_attr
+from simspad.io.recording.writer import keep_after_disk_full
 from simspad.io.safe_paths import refuse_hdf5_links
 
 #: Most bytes of frames held before they are written (memory does not grow with the sequence length).
@@ -46,11 +50,15 @@ class ReconstructionSink:
     def __init__(self, path: Path, times_s: np.ndarray, shape: tuple[int, int], attrs: dict):
         path.parent.mkdir(parents=True, exist_ok=True)
         self.h5 = h5py.File(path, "w")
-        self.h5.create_dataset("t", data=np.asarray(times_s, np.float64), track_times=False)
-        self.ds = self.h5.create_dataset("flux", shape=(len(times_s), *shape), dtype=np.float32,
-                                         chunks=(1, *shape), track_times=False, **FLOAT_FRAMES_STORAGE)
-        for k, v in attrs.items():
-            self.h5.attrs[k] = v
+        try:
+            self.h5.create_dataset("t", data=np.asarray(times_s, np.float64), track_times=False)
+            self.ds = self.h5.create_dataset("flux", shape=(len(times_s), *shape), dtype=np.float32,
+                                             chunks=(1, *shape), track_times=False, **FLOAT_FRAMES_STORAGE)
+            for k, v in attrs.items():
+                self.h5.attrs[k] = v
+        except BaseException as exc:
+            self._failed(exc)
+            raise
         frame_bytes = max(1, int(np.prod(shape)) * 4)
         self._buffer = np.empty((max(1, min(len(times_s), BUFFER_BYTES // frame_bytes)), *shape), np.float32)
         self._first = 0  # index of the frame in _buffer[0]
@@ -68,14 +76,28 @@ class ReconstructionSink:
     def flush(self) -> None:
         """Write the frames held."""
         if self._held:
-            self.ds[self._first:self._first + self._held] = self._buffer[:self._held]
+            try:
+                self.ds[self._first:self._first + self._held] = self._buffer[:self._held]
+            except BaseException as exc:
+                self._failed(exc)
+                raise
             self._held = 0
 
     def close(self) -> None:
         try:
             self.flush()
         finally:
-            self.h5.close()
+            try:
+                self.h5.close()
+            except BaseException as exc:
+                self._failed(exc)
+                raise
+
+    def _failed(self, exc: BaseException) -> None:
+        """On a full disk, keep the file object alive (freeing it would crash HDF5: see
+        :func:`simspad.io.recording.writer.keep_after_disk_full`)."""
+        if is_disk_full(exc):
+            keep_after_disk_full(self)  # the file and its dataset object
 
 
 #: Root attributes of a reconstruction file, all strings.

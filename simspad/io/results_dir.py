@@ -23,13 +23,16 @@ import csv
 import hashlib
 import json
 import math
+import os
 import re
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
+from simspad import defaults
 from simspad.errors import InputError
+from simspad.io.csv_cells import csv_safe, csv_unescape
 from simspad.io.output_dirs import claim_output_dir
 from simspad.io.safe_paths import confined_path
 
@@ -59,11 +62,13 @@ def _fmt(v) -> str:
 
 
 def write_csv(path: Path, columns, rows) -> None:
+    """``columns`` then one line per row; text a spreadsheet would run as a formula is escaped
+    (:func:`simspad.io.csv_cells.csv_safe`; :func:`read_csv` undoes it)."""
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(columns)
         for r in rows:
-            w.writerow([_fmt(r.get(c)) for c in columns])
+            w.writerow([_fmt(csv_safe(r.get(c))) for c in columns])
 
 
 def _parse(col: str, v: str):
@@ -81,16 +86,26 @@ def _parse(col: str, v: str):
 
 def read_csv(path: Path) -> list[dict]:
     """Rows of a results CSV with numbers parsed (unknown columns kept as text); an ``image`` must name a file
-    inside the results directory (InputError otherwise, as for malformed CSV)."""
+    inside the results directory (InputError otherwise, as for malformed CSV). More than
+    :data:`~simspad.defaults.MAX_RESULTS_ROWS` rows are refused while reading (``SIMSPAD_IGNORE_LIMITS=1``
+    lifts it)."""
     path = Path(path)
+    limit = math.inf if os.environ.get("SIMSPAD_IGNORE_LIMITS", "") == "1" else defaults.MAX_RESULTS_ROWS
+    rows = []
     try:
         with open(path, newline="", encoding="utf-8") as f:
-            rows = [{k: _parse(k, v) for k, v in row.items()} for row in csv.DictReader(f)]
+            for row in csv.DictReader(f):
+                if len(rows) >= limit:
+                    raise InputError(f"more than {defaults.MAX_RESULTS_ROWS} rows, the limit of one results "
+                                     "table (set SIMSPAD_IGNORE_LIMITS=1 to try anyway)", path=path)
+                rows.append({k: _parse(k, csv_unescape(v)) for k, v in row.items()})
     except (csv.Error, UnicodeDecodeError) as exc:
         raise InputError(f"not a readable results CSV ({str(exc)[:120]})", path=path) from None
+    checked = set()
     for i, row in enumerate(rows):
-        if row.get("image"):
+        if row.get("image") and row["image"] not in checked:
             confined_path(path.parent, row["image"], source=path, field=f"row {i + 2}: image")
+            checked.add(row["image"])
     return rows
 
 

@@ -116,6 +116,8 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     t0, t1 = _interval(tl, settings.start_s, settings.duration_s, render_dir)
     check_recording_size(sensors, t1 - t0, tl.width, tl.height, settings.gt_rate_hz, out_path)  # before any write
     flux_tl = tl.photon_flux(lux, optics)
+    if "events" in sensors:
+        events.check_noise_work(flux_tl, t0, t1, sensors["events"], lux)  # hours of noise draws: refused now
     runners = {"spad": lambda w, p, rng: spad.simulate_spad(w, flux_tl, t0, t1, p, rng, progress),
                "frames": lambda w, p, rng: frames.simulate_frames(w, flux_tl, t0, t1, p, rng, progress),
                "events": lambda w, p, rng: events.simulate_events(w, flux_tl, t0, t1, p, rng, lux, progress)}

@@ -15,14 +15,17 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from simspad import defaults
 from simspad.errors import SimSpadError
 from simspad.io.results_dir import read_csv
+from simspad.io.safe_paths import confined_path
 
 DAGGER = "†"
 
@@ -70,6 +73,7 @@ def load_results(results_dirs) -> list[tuple[dict, Path]]:
         csv_path = d / "results.csv"
         if not csv_path.is_file():
             raise SimSpadError("not a results directory (results.csv missing)", path=d)
+        confined_path(d, "results.csv", source=d, field="results.csv")  # a link out of d is not read
         try:
             rows = read_csv(csv_path)
         except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -105,6 +109,8 @@ def missing_recordings(results_dirs) -> set[str]:
     """Recordings a scored submission left out (``missing_recordings`` of its ``results.json``)."""
     out: set[str] = set()
     for d in results_dirs:
+        if (Path(d) / "results.json").exists():
+            confined_path(d, "results.json", source=d, field="results.json")
         try:
             meta = json.loads((Path(d) / "results.json").read_text(encoding="utf-8"))
         except (OSError, ValueError):
@@ -148,10 +154,31 @@ def mean_finite(values) -> float:
     return float(np.mean(v)) if v else float("nan")
 
 
+def _check_size(rows: list[dict], results_dirs) -> None:
+    """Refuse, before any plot, a leaderboard whose plots and tables would take minutes: more methods, table
+    columns or regime cells than :mod:`simspad.defaults` allows (``SIMSPAD_IGNORE_LIMITS=1`` lifts them)."""
+    if os.environ.get("SIMSPAD_IGNORE_LIMITS", "") == "1":
+        return
+    luxes = {r["lux"] for r in rows}
+    speeds = {r["speed_factor"] for r in rows}
+    counts = (("methods", len({r["method"] for r in rows}), defaults.MAX_LEADERBOARD_METHODS, "method",
+               "each is a line of every plot and a heatmap panel"),
+              (f"light-level × speed cells ({len(luxes)} × {len(speeds)})", len(luxes) * len(speeds),
+               defaults.MAX_LEADERBOARD_REGIME_CELLS, "lux", "each is a cell of every method's heatmap"),
+              ("scene × speed × lux columns", len({(r["scene"], r["speed_factor"], r["lux"]) for r in rows}),
+               defaults.MAX_LEADERBOARD_COLUMNS, "scene", "each is a column of every table"))
+    for what, n, limit, field_name, why in counts:
+        if n > limit:
+            raise SimSpadError(f"{n} {what}, above the {limit} one leaderboard shows ({why}); pass fewer results "
+                               "directories or set SIMSPAD_IGNORE_LIMITS=1 to try anyway",
+                               path=Path(results_dirs[0]) / "results.csv", field=field_name)
+
+
 def build_board(results_dirs) -> Board:
     """Merge the ``results.csv`` of ``results_dirs`` (later ones override) into a :class:`Board`."""
     loaded = load_results(results_dirs)
     rows = [normalise_speed(r) for r, _ in loaded]
+    _check_size(rows, results_dirs)
     sources = {(r["method"], r["recording"]): d for r, d in loaded}
     info: dict[str, dict] = {}
     per_cell: dict[tuple[str, str, float], list[float]] = defaultdict(list)

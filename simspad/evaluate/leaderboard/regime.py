@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.evaluate.leaderboard.board import Board, fmt_number, mean_finite, method_label
+from simspad.io.csv_cells import csv_safe
 
 #: The sensor pairs compared on the map (``sensors`` column of results.csv).
 SPAD_EVENTS, FRAMES_EVENTS = "S+E", "F+E"
@@ -173,10 +174,10 @@ def write_regime_csv(path: Path, board: Board, regime: Regime) -> None:
                     q = regime.psnr.get((m, lux, k), math.nan)
                     if not math.isfinite(q):
                         continue
-                    w.writerow([m, board.info[m]["label"], regime.sensors[m], lux, k, regime.image_speed_px_s[k],
-                                q, regime.bandwidth_khz.get((m, lux, k), math.nan),
+                    w.writerow([csv_safe(m), csv_safe(board.info[m]["label"]), csv_safe(regime.sensors[m]), lux, k,
+                                regime.image_speed_px_s[k], q, regime.bandwidth_khz.get((m, lux, k), math.nan),
                                 "true" if m in front else "false"])
                 if diff is not None:
                     i, j = regime.speeds.index(k), regime.luxes.index(lux)
-                    w.writerow(["best_S+E-best_F+E", f"{se_name[i, j]} - {fe_name[i, j]}", "", lux, k,
+                    w.writerow(["best_S+E-best_F+E", csv_safe(f"{se_name[i, j]} - {fe_name[i, j]}"), "", lux, k,
                                 regime.image_speed_px_s[k], diff[i, j], "", ""])

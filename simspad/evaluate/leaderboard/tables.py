@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 from simspad.evaluate.metrics import STAR_FREQS_CYC_PX
+from simspad.io import csv_cells
 from simspad.evaluate.leaderboard.board import (
     Board,
     best_ranked,
@@ -244,10 +245,9 @@ MTF_NOTE = ("Siemens star: the reconstruction's contrast relative to the ground 
 
 def csv_safe(value):
     """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR first) gets a
-    leading apostrophe (the OWASP rule); numbers pass unchanged."""
-    if isinstance(value, str) and value[:1] in ("=", "+", "-", "@", "\t", "\r"):
-        return "'" + value
-    return value
+    leading apostrophe (the OWASP rule); numbers pass unchanged: :func:`simspad.io.csv_cells.csv_safe`, the one
+    rule of every CSV SimSPAD writes."""
+    return csv_cells.csv_safe(value)
 
 
 def csv_column(scene_column: str, lux: float) -> str:

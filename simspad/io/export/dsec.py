@@ -12,26 +12,46 @@ Layout (DSEC, Gehrig et al. 2021)::
 ``t_offset`` is the recording's start rounded down to a whole millisecond, so ``t`` starts near 0 as in DSEC and
 ``t + t_offset`` is the recording's own time base (µs since the timeline's t = 0). ``ms_to_idx`` is recomputed
 while the events stream through (from the offset, not copied), which also checks that the events are sorted.
-The same recording always gives the same bytes. Datasets are gzip-compressed with h5py's built-in filter (DSEC's files use Blosc through ``hdf5plugin``; gzip
+The same recording always gives the same bytes. A full disk ends the export with one line: the HDF5 objects whose
+write failed are kept alive, not freed (which would crash the process). Datasets are gzip-compressed with h5py's built-in filter (DSEC's files use Blosc through ``hdf5plugin``; gzip
 needs no plugin on the reading side).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from simspad.io.atomic import atomic_path
+from simspad.io.atomic import atomic_path, is_disk_full
 from simspad.io.export.common import EXPORT_CHUNK_EVENTS, check_sorted, require_group
+from simspad.io.recording.writer import keep_after_disk_full
 
 #: HDF5 library version bounds (fixed, and no object times stored: the same recording gives the same bytes).
 _LIBVER = ("v110", "v110")
 #: HDF5 chunk of each event column (rows).
 _H5_CHUNK = 1 << 16
 _COLUMNS = (("p", np.uint8), ("t", np.int64), ("x", np.uint16), ("y", np.uint16))
+
+
+@contextlib.contextmanager
+def _h5_output(path: Path, held: list):
+    """``h5py.File(path, "w")``; on a full disk the file and the dataset objects the caller put in ``held`` are
+    kept alive rather than freed (HDF5 would crash retrying their close:
+    :func:`simspad.io.recording.writer.keep_after_disk_full`) and the error passes on."""
+    h5 = h5py.File(path, "w", libver=_LIBVER)
+    try:
+        yield h5
+        h5.close()
+    except BaseException as exc:
+        if is_disk_full(exc):
+            keep_after_disk_full((h5, held))
+        else:
+            h5.close()
+        raise
 
 
 def export_dsec(rec, out: Path, *, chunk_events: int = EXPORT_CHUNK_EVENTS) -> Path:
@@ -58,11 +78,13 @@ def export_dsec(rec, out: Path, *, chunk_events: int = EXPORT_CHUNK_EVENTS) -> P
     n_ms = int(math.ceil(round(t1_s * 1e3, 6))) + 1 - t_offset_us // 1000
     boundaries_us = np.arange(n_ms, dtype=np.int64) * 1000
     ms_to_idx = np.zeros(n_ms, dtype=np.uint64)
-    with atomic_path(out) as tmp, h5py.File(tmp, "w", libver=_LIBVER) as h5:
+    held: list = []
+    with atomic_path(out) as tmp, _h5_output(tmp, held) as h5:
         cols = {name: h5.create_dataset(f"events/{name}", shape=(0,), maxshape=(None,), dtype=dtype,
                                         chunks=(_H5_CHUNK,), compression="gzip", compression_opts=1, shuffle=True,
                                         track_times=False)
                 for name, dtype in _COLUMNS}
+        held.append(cols)
         n, last_us = 0, np.iinfo(np.int64).min
         for ev in rec.events.iter_chunks(chunk_events):
             t_us = ev["t"].astype(np.int64, copy=False)

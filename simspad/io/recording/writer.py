@@ -60,6 +60,20 @@ def _mark_close_failed() -> None:
     _CLOSE_FAILED = True
 
 
+#: HDF5 files whose write or close failed on a full disk, kept alive: freeing one makes HDF5 retry its close,
+#: which crashes the process (SIGSEGV) in the middle of its work instead of at an exit the CLI skips.
+_FAILED_FILES: list = []
+
+
+def keep_after_disk_full(obj) -> None:
+    """For any writer of HDF5 files (exporters, saved reconstructions): after a write or close failed on a full
+    disk, keep ``obj`` (the h5py file, or an object holding it and its datasets) alive and mark the process
+    (:func:`hdf5_close_failed`), so that it ends with one line rather than a crash."""
+    _FAILED_FILES.append(obj)
+    _install_quiet_dealloc_hook()
+    _mark_close_failed()
+
+
 def _install_quiet_dealloc_hook() -> None:
     """Drop h5py's "Exception ignored in ObjectID.__dealloc__" tracebacks caused by a full disk: each failed write
     frees temporary HDF5 objects whose release fails again; the writer reports the full disk once, as one line.

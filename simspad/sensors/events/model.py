@@ -29,17 +29,21 @@ Per pixel (flattened index ``y·W + x``):
   crossing that falls in that window fires when the window ends (if the change still exceeds the threshold).
 
 This module holds what the parameters alone determine: the event labels, the fixed pattern (:class:`PixelMaps`),
-the parameter checks and the sensor's photocurrent.
+the parameter checks, the sensor's photocurrent and the bound on the noise processes' work
+(:func:`noise_work_problem`).
 """
 
 from __future__ import annotations
 
+import math
+import os
 from typing import NamedTuple
 
 import numpy as np
 
+from simspad import defaults
 from simspad.errors import SimSpadError
-from simspad.physics.photoreceptor import photocurrent_e_s, reference_current_1lux
+from simspad.physics.photoreceptor import photocurrent_e_s, reference_current_1lux, shot_noise_rate_hz
 from simspad.sensors.presets import EventParams
 
 LABEL_SIGNAL, LABEL_SHOT, LABEL_LEAK, LABEL_HOT = 0, 1, 2, 3
@@ -93,11 +97,76 @@ def validate_params(params: EventParams) -> None:
         ("pixel_pitch_m", params.pixel_pitch_m > 0, "must be > 0"),
         ("photoreceptor_cutoff_hz_max", params.photoreceptor_cutoff_hz_max > 0, "must be > 0"),
         ("hot_pixel_fraction", params.hot_pixel_fraction <= 1, "must be in [0, 1]"),
-        ("substep_tolerance", 0 < params.substep_tolerance <= 0.1, "must be in (0, 0.1]"),
+        ("substep_tolerance", defaults.MIN_SUBSTEP_TOLERANCE <= params.substep_tolerance <= 0.1,
+         f"must be in [{defaults.MIN_SUBSTEP_TOLERANCE:g}, 0.1] (each tenfold cut costs ~3× the internal steps; "
+         "crossings have converged at 1e-5)"),
     ]
     for name, ok, message in checks:
         if not ok:
             raise SimSpadError(f"{message}, got {getattr(params, name)!r}", field=f"{_FIELD}.{name}")
+
+
+def noise_rates_hz(params: EventParams, lux: float, mean_ratio: float | None = None) -> tuple[float, float]:
+    """Mean noise-process rates per pixel, Hz: (shot noise, hot pixels); each is one hazard draw per event.
+
+    ``mean_ratio`` is the pixels' mean of ``(I₁/I)^γ`` when the scene is known (see
+    :func:`mean_shot_noise_ratio`). Without it the shot-noise rate is taken at the scene's mean luminance for the
+    brightest or darkest possible scene, ``r₁·min(1, lux^−γ)`` (the mean pixel's current is ``lux·a + I_dark``
+    with ``I₁ = a + I_dark``): a lower bound whatever the scene, since ``I^−γ`` is convex (Jensen).
+    """
+    exponent = params.shot_noise_current_exponent
+    if mean_ratio is None:
+        mean_ratio = math.exp(min(0.0, -exponent * math.log(lux))) if lux > 0 else 1.0  # min(1, lux^−γ)
+    return params.shot_noise_rate_hz_at_1lux * mean_ratio, params.hot_pixel_fraction * params.hot_pixel_rate_hz
+
+
+def mean_shot_noise_ratio(current_e_s: np.ndarray, current_1lux: float, params: EventParams) -> float:
+    """Mean over pixels of ``(I₁/I)^γ``: the shot-noise rate of photocurrents ``current_e_s`` over ``r₁``."""
+    rate = shot_noise_rate_hz(current_e_s, current_1lux, 1.0, params.shot_noise_current_exponent)
+    return float(np.mean(rate, dtype=np.float64))
+
+
+def leak_event_rate_hz(params: EventParams) -> float:
+    """Leak events per pixel-second, a lower bound: half the pixels leak at least the median rate (log-normal
+    spread), and a pixel is blind from detection until ``refractory_s`` after its readout (latency plus jitter,
+    taken at 4 σ, plus the kernel's 1 ns guard)."""
+    blind_s = max(params.refractory_s, 0.0) + max(params.latency_s + 4 * params.jitter_s, 0.0) + 1e-9
+    return 0.5 * min(params.leak_rate_hz, 1.0 / blind_s)
+
+
+def noise_work_problem(params: EventParams, n_pixels: int, duration_s: float, lux: float,
+                       mean_ratio: float | None = None) -> str | None:
+    """Why the noise processes of ``n_pixels`` over ``duration_s`` would take too much work, or None.
+
+    The kernel draws a hazard for every shot-noise and hot-pixel event, even while the pixel is blind after an
+    event (the refractory period caps the events written, not these draws), and writes every leak event, so the
+    work is pixels × seconds × rate, refused above :data:`~simspad.defaults.MAX_EVENT_NOISE_DRAWS`
+    (``SIMSPAD_IGNORE_LIMITS=1`` lifts it).
+    """
+    if os.environ.get("SIMSPAD_IGNORE_LIMITS", "") == "1":
+        return None
+    shot_hz, hot_hz = noise_rates_hz(params, lux, mean_ratio)
+    leak_hz = leak_event_rate_hz(params)
+    rate_hz = shot_hz + hot_hz + leak_hz
+    work = float(n_pixels) * float(duration_s) * rate_hz
+    if not work > defaults.MAX_EVENT_NOISE_DRAWS:
+        return None
+    shot = (f"{shot_hz:.3g} Hz at the first keyframe" if mean_ratio is not None
+            else f"≥ {shot_hz:.3g} Hz at the scene's mean luminance")
+    return (f"{n_pixels} pixels × {duration_s:g} s × {rate_hz:.3g} noise events per pixel-second (shot noise "
+            f"{shot} at {lux:g} lx; hot pixels {hot_hz:.3g} Hz on average; leak ≥ {leak_hz:.3g} Hz) is "
+            f"{work:.3g} random draws, above the limit of {defaults.MAX_EVENT_NOISE_DRAWS:.3g} (~"
+            f"{work * 20e-9 / 3600:.3g} CPU-hours; the refractory period caps the events, not this work): lower "
+            "shot_noise_rate_hz_at_1lux, hot_pixel_rate_hz or leak_rate_hz, or set SIMSPAD_IGNORE_LIMITS=1 to try "
+            "anyway")
+
+
+def noise_field(params: EventParams, lux: float) -> str:
+    """The parameter that contributes most of the noise work (for a message's field)."""
+    shot_hz, hot_hz = noise_rates_hz(params, lux)
+    rates = {"shot_noise_rate_hz_at_1lux": shot_hz, "hot_pixel_rate_hz": hot_hz,
+             "leak_rate_hz": leak_event_rate_hz(params)}
+    return f"{_FIELD}.{max(rates, key=rates.get)}"
 
 
 def sensor_photocurrent_e_s(flux_ph_s_m2, params: EventParams, out: np.ndarray | None = None) -> np.ndarray:

@@ -30,10 +30,14 @@ from simspad.sensors.events.kernel import (
     model_constants,
     simulate_blocks,
 )
+from simspad.errors import SimSpadError
 from simspad.sensors.events.model import (
     LABEL_NAMES,
     PixelMaps,
     draw_pixel_maps,
+    mean_shot_noise_ratio,
+    noise_field,
+    noise_work_problem,
     sensor_current_1lux_e_s,
     sensor_photocurrent_e_s,
     validate_params,
@@ -222,6 +226,18 @@ class _EventsWriter:
         self.columns["p"].append(pol)
         self.columns["label"].append(label)
         self.counts[:] += np.bincount(label, minlength=4)[:4]
+
+
+def check_noise_work(flux_tl, t0: float, t1: float, params: EventParams, lux: float) -> None:
+    """Refuse, before any work, noise rates whose random draws would take hours (:func:`~.model.noise_work_problem`),
+    with the shot-noise rate of this scene's pixels at ``t0`` (the same rates :func:`simulate_events` starts
+    from)."""
+    current = sensor_photocurrent_e_s(flux_tl.sample(t0), params)
+    current_1lux = sensor_current_1lux_e_s(float(np.mean(flux_tl.keyframe(0), dtype=np.float64)), lux, params)
+    problem = noise_work_problem(params, current.size, t1 - t0, lux,
+                                 mean_shot_noise_ratio(current, current_1lux, params))
+    if problem:
+        raise SimSpadError(problem, field=noise_field(params, lux))
 
 
 def simulate_events(writer, flux_tl, t0: float, t1: float, params: EventParams, rng: np.random.Generator,
