@@ -62,7 +62,8 @@ from simspad.evaluate.protocol import (
     star_figures,
 )
 from simspad.evaluate.real_data import NO_GT_NOTE, evaluation_times, score_without_gt, star_region
-from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
+from simspad.evaluate.recordings import QuietBar, RecordingEntry, fill_entries, list_recordings, spec_evaluation
+from simspad.io.atomic import is_disk_full
 from simspad.io.output_dirs import owned_output_dir
 from simspad.io.reconstructions import ReconstructionSink
 from simspad.io.recording import open_recording
@@ -78,8 +79,6 @@ from simspad.io.results_dir import (
 from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, check_method_params, get_method
 from simspad.physics.pairwise_sum import pairwise_sum
-from simspad.evaluate.recordings import QuietBar, fill_entries
-from simspad.io.atomic import is_disk_full
 
 MAX_WORKERS = 2
 
