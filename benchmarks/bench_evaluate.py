@@ -62,7 +62,8 @@ def run_timed(cmd: list[str], env: dict, cwd: Path, ok: tuple[int, ...] = (0, 1)
 
 
 def subset(dataset: Path, n: int, dest: Path) -> list[Path]:
-    """Links to ``n`` recordings of ``dataset`` spread over scenes and light levels, in ``dest``."""
+    """Hard links to (or, across filesystems, copies of) ``n`` recordings of ``dataset`` spread over scenes and
+    light levels, in ``dest``: ``evaluate`` refuses a symbolic link leading out of the folder it reads."""
     recs = sorted(p for p in (dataset / "recordings").rglob("*.h5") if not p.name.startswith("."))
     if not recs:
         sys.exit(f"no recordings under {dataset / 'recordings'}")
@@ -70,7 +71,10 @@ def subset(dataset: Path, n: int, dest: Path) -> list[Path]:
     chosen = recs[::step][:n]
     dest.mkdir(parents=True)
     for p in chosen:
-        (dest / p.name).symlink_to(p.resolve())
+        try:
+            os.link(p, dest / p.name)
+        except OSError:  # another filesystem
+            shutil.copy2(p, dest / p.name)
     return chosen
 
 

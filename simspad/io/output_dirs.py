@@ -314,8 +314,12 @@ def _remove_empty_dirs(root: Path, rel: Path) -> None:
 
 
 def _remove_if_only_bookkeeping(path: Path) -> None:
-    """Remove a folder this command created when it holds nothing but the lock and markers (a failed run)."""
+    """Remove a folder this command created when it holds nothing but the lock, markers and empty folders (a
+    failed run: a render that hit a full disk before its first keyframe leaves an empty ``frames/``)."""
     try:
+        for sub in path.iterdir():
+            if not sub.is_symlink() and sub.is_dir():
+                _remove_empty_tree(sub)
         names = [p.name for p in path.iterdir()]
     except OSError:
         return
@@ -325,6 +329,16 @@ def _remove_if_only_bookkeeping(path: Path) -> None:
                 (path / n).unlink()
         with contextlib.suppress(OSError):
             path.rmdir()
+
+
+def _remove_empty_tree(d: Path) -> None:
+    """Remove ``d`` if it holds only empty folders (never following a link); anything else keeps it."""
+    for sub in d.iterdir():
+        if sub.is_symlink() or not sub.is_dir():
+            return
+        _remove_empty_tree(sub)
+    with contextlib.suppress(OSError):
+        d.rmdir()
 
 
 def _is_plain_relative(rel: str) -> bool:
