@@ -75,9 +75,13 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
                    "rest by reprojection (directly seen emitters rendered, reflected light warped), rendering blocks or "
                    "whole keyframes where the warps disagree — 1.0–3.6x less render work on the built-in scenes at 64 "
                    "spp, with more events than linear on the office (docs/rendering.md).")
+@click.option("--gt-rate", "gt_rate_hz", type=float, default=defaults.GT_RATE_HZ, show_default=True,
+              help="Ground-truth rate (Hz): a geometry pass (depth, instance ids at the pixel centres) is rendered at "
+                   "ground-truth instant, for the recordings' masks and motion field (`simspad simulate` records "
+                   "ground truth at the default rate; `simspad generate` renders at its evaluation.rate_hz).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
-           out_dir):
+           gt_rate_hz, out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
 
     SCENE is a built-in scene (fan, office, piano, plant, siemens-star: `simspad scenes` lists them) or a folder
@@ -87,7 +91,7 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
-                              interpolation=interpolation, out_dir=out_dir, progress=True)
+                              interpolation=interpolation, gt_rate_hz=gt_rate_hz, out_dir=out_dir, progress=True)
     click.echo(describe_render(summary))
 
 
