@@ -237,16 +237,19 @@ def preview(target, out_path, kind, start_s, duration_s, slowdown, fps, spad_rat
 @click.option("--to", "fmt", type=click.Choice(list(EXPORT_FORMATS)), required=True,
               help="; ".join(f"{k}: {v}" for k, v in EXPORT_FORMATS.items()) + ".")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
-              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz).")
+              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz, dsec-flow).")
 @click.option("--spad-packing", "packing", type=click.Choice(list(EXPORT_PACKINGS)), default="packed",
               show_default=True, help="npz: SPAD bits 8 pixels a byte (as stored) or one uint8 0/1 per pixel.")
 @click.option("--frames-format", type=click.Choice(list(EXPORT_FRAME_FORMATS)), default="png", show_default=True,
               help="npz: one 16-bit PNG per frame, or one multi-page TIFF stack.")
-def export(recording, fmt, out_path, packing, frames_format):
-    """Export RECORDING (.h5) to a format other tools read (DSEC, AEDAT 4, EVT 3.0, npz/PNG/EXR)."""
+@click.option("--flow-stride", type=click.IntRange(min=1), default=1, show_default=True,
+              help="dsec-flow: ground-truth intervals per flow map (DSEC's maps span 100 ms: 100 at 1 kHz).")
+def export(recording, fmt, out_path, packing, frames_format, flow_stride):
+    """Export RECORDING (.h5) to a format other tools read (DSEC, AEDAT 4, EVT 3.0, npz/PNG/EXR, DSEC flow)."""
     from simspad.cli.export import export_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    export_from_cli(recording, fmt, out_path, packing=packing, frames_format=frames_format)
+    export_from_cli(recording, fmt, out_path, packing=packing, frames_format=frames_format,
+                    flow_stride=flow_stride)
 
 
 def main(argv: list[str] | None = None) -> int:
