@@ -56,8 +56,12 @@ def write_geometry(path: str | Path, depth_z: np.ndarray, instance: np.ndarray) 
     """Write one geometry pass atomically (uncompressed ``.npz``: ``depth_z`` float32, ``instance`` uint16)."""
     path = Path(path)
     buf = io.BytesIO()
-    np.savez(buf, depth_z=np.ascontiguousarray(depth_z, dtype=np.float32),
-             instance=np.ascontiguousarray(instance, dtype=np.uint16))
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as zf:
+        for name, a in (("depth_z", np.ascontiguousarray(depth_z, dtype=np.float32)),
+                        ("instance", np.ascontiguousarray(instance, dtype=np.uint16))):
+            # a fixed entry time (np.savez stamps the current one), so the same pass gives the same bytes
+            with zf.open(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), "w") as f:
+                np.lib.format.write_array(f, a, allow_pickle=False)
     with atomic_path(path) as tmp:
         Path(tmp).write_bytes(buf.getvalue())
     return path
