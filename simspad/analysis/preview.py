@@ -282,7 +282,7 @@ def flow_colours(flow: np.ndarray, full_scale: float, valid: np.ndarray | None =
 
 
 def instance_colours(instance: np.ndarray) -> np.ndarray:
-    """``[H, W, 3]`` in 0–1: instance k ≥ 1 gets hue k·φ (golden ratio, so neighbouring ids differ), 0 is black."""
+    """``[H, W, 3]`` in 0–1: instance k ≥ 1 gets hue k·φ (golden ratio: neighbouring ids differ), 0 is black."""
     from matplotlib.colors import hsv_to_rgb  # deferred: matplotlib is heavy and only the preview draws
 
     ids = np.asarray(instance, np.int64)

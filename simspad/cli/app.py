@@ -106,13 +106,16 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 @click.option("--set", "overrides", multiple=True, metavar="SENSOR.FIELD=VALUE",
               help="Override a preset field, e.g. --set spad.gate_s=1e-6 (repeatable; presets: swissspad2, "
                    "blackfly_s, prophesee_gen4 — `simspad info` on a recording lists every field).")
+@click.option("--gt-rate", "gt_rate_hz", type=float, default=None,
+              help="Ground-truth rate (Hz); default: the render's geometry-pass rate (its masks and motion field are "
+                   "recorded at those instants), else 1000.")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True, help="Recording (.h5).")
-def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out_path):
+def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, gt_rate_hz, out_path):
     """Simulate the sensors on a render directory at one lux level and write a recording."""
     from simspad.cli.simulate import simulate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
     path = simulate_from_cli(render_dir, lux=lux, sensors=sensors, start_s=start_s, duration_s=duration_s,
-                             seed=seed, overrides=overrides, out_path=out_path)
+                             seed=seed, overrides=overrides, out_path=out_path, gt_rate_hz=gt_rate_hz)
     click.echo(f"wrote {path}")
 
 

@@ -6,7 +6,8 @@ knows no sensor). :func:`plan_geometry` lists the instants (:func:`simspad.io.ge
 rendered span), their poses and cache-keyed file names; each instant belongs to the keyframe at or before it
 (:func:`geometry_owners`), so whichever process renders a run of keyframes renders their instants too, and a
 re-run re-uses every pass already on disk. A pass is one unjittered sample per pixel through the depth + shape
-AOV integrator: about 0.4 % of a radiance render.
+AOV integrator: 0.4 % of a 512² 64-spp office render's samples; on the mini's 80 × 60 px renders its fixed cost
+makes it 8–23 ms of CPU (11–45 % of an 8-spp keyframe), 3.4 % of the mini's keyframe CPU in all.
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ def plan_geometry(ts: TrajectorySet, ms: MitsubaScene, t0: float, t1: float, rat
     cams = camera_poses(ts, ms.rest_camera_to_world, times)
     instants = []
     for t, name, cam in zip(times, names, cams):
-        inst = {"t": float(t), "file": name, "camera_to_world": cam.tolist(), "camera_velocity": _velocity(ts.camera, t)}
+        inst = {"t": float(t), "file": name, "camera_to_world": cam.tolist(),
+                "camera_velocity": _velocity(ts.camera, t)}
         if ts.objects:
             inst["object_to_world"] = {k: m.tolist() for k, m in sorted(object_poses(ts, float(t)).items())}
             inst["object_velocity"] = {k: _velocity(tr, t) for k, tr in sorted(ts.objects.items())}

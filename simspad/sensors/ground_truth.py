@@ -85,14 +85,26 @@ class _GeometryFrames:
 
     def get(self, j: int) -> tuple[np.ndarray, np.ndarray]:
         if j not in self._cache:
-            if len(self._cache) >= 2:
+            if len(self._cache) >= 3:  # this instant's pass, the next one's, and the one before (read in order)
                 self._cache.pop(min(self._cache))
             self._cache[j] = read_geometry(self.geometry.files[j], self.width, self.height)
         return self._cache[j]
 
 
-def _geometry_rows(frames: _GeometryFrames, camera: PinholeCamera, j: int) -> dict:
-    """Depth, instances, flow, validity and velocity of geometry instant ``j``."""
+def _next_instants(geometry: GeometryIndex, match: np.ndarray, t: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Per ground-truth instant, the geometry pass one ground-truth interval later (-1 where the render has none):
+    the next instant's, and for the last one the pass at ``t[-1] + 1/rate_hz`` if the render holds it."""
+    nxt = np.full(len(match), -1, dtype=np.int64)
+    nxt[:-1] = match[1:]
+    after = t[-1] + 1.0 / rate_hz
+    k = int(np.clip(np.searchsorted(geometry.times_s, after - TIME_MATCH_S), 0, len(geometry.times_s) - 1))
+    if abs(geometry.times_s[k] - after) <= TIME_MATCH_S:
+        nxt[-1] = k
+    return nxt
+
+
+def _geometry_rows(frames: _GeometryFrames, camera: PinholeCamera, j: int, j_next: int) -> dict:
+    """Depth, instances, flow (to pass ``j_next``; -1: none), validity and velocity of geometry pass ``j``."""
     g = frames.geometry
     depth, inst = frames.get(j)
     ids = {name: g.instance_of(name) for name in g.objects}
@@ -100,11 +112,11 @@ def _geometry_rows(frames: _GeometryFrames, camera: PinholeCamera, j: int) -> di
                for k, name in enumerate(g.objects)}
     velocity = image_velocity(camera, depth, inst, g.camera_to_world[j],
                               (g.camera_velocity[j, :3], g.camera_velocity[j, 3:]), objects)
-    if j + 1 < len(g.times_s):
-        moves = {ids[name]: relative_motion(g.object_to_world[j, k], g.object_to_world[j + 1, k])
+    if j_next >= 0:
+        moves = {ids[name]: relative_motion(g.object_to_world[j, k], g.object_to_world[j_next, k])
                  for k, name in enumerate(g.objects)}
-        flow, moved_depth = motion_field(camera, depth, inst, g.camera_to_world[j], g.camera_to_world[j + 1], moves)
-        depth_b, inst_b = frames.get(j + 1)
+        flow, moved_depth = motion_field(camera, depth, inst, g.camera_to_world[j], g.camera_to_world[j_next], moves)
+        depth_b, inst_b = frames.get(j_next)
         valid = flow_validity(camera, flow, moved_depth, inst, depth_b, inst_b)
     else:  # no next instant in the render: the last interval's motion is not known
         flow = np.full((camera.height, camera.width, 2), np.nan)
@@ -145,6 +157,7 @@ def write_ground_truth(writer, flux_tl, t0: float, t1: float, rate_hz: float = d
     if found is not None:
         geometry, match, camera = found
         frames = _GeometryFrames(geometry, W, H)
+        following = _next_instants(geometry, match, t, rate_hz)
         writer.set_attrs("gt", geometry="exact at each instant: one unjittered sample per pixel centre")
         names = json.dumps([""] + list(geometry.instances))
         out = {
@@ -180,8 +193,13 @@ def write_ground_truth(writer, flux_tl, t0: float, t1: float, rate_hz: float = d
                                                       "order of the objects attribute)"})
         writer.set_attrs("camera", **_camera_attrs(camera))
         writer.write_dataset("camera/K", camera.K(), attrs={"units": "px"})
-    elif flux_tl.has_depth:
-        depth = writer.append_dataset("gt/depth", (H, W), np.float32, chunk_rows=rows, attrs={"units": "m"})
+    else:
+        if "geometry" in flux_tl.meta:  # passes at other instants (another rate or span): say why none is here
+            rate = flux_tl.meta["geometry"].get("rate_hz") if isinstance(flux_tl.meta["geometry"], dict) else None
+            writer.set_attrs("gt", geometry=f"absent: the render's geometry passes (at {rate} Hz) do not fall on "
+                                            "these ground-truth instants")
+        if flux_tl.has_depth:
+            depth = writer.append_dataset("gt/depth", (H, W), np.float32, chunk_rows=rows, attrs={"units": "m"})
     for i in range(0, len(t), rows):
         ts = t[i : i + rows]
         # flux and depth of an instant together: both come from the same two keyframes, which the timeline's
@@ -192,7 +210,7 @@ def write_ground_truth(writer, flux_tl, t0: float, t1: float, rate_hz: float = d
             if depth is not None:
                 depth_rows.append(flux_tl.depth(ti))
             if out is not None:
-                geo_rows.append(_geometry_rows(frames, camera, int(match[i + k])))
+                geo_rows.append(_geometry_rows(frames, camera, int(match[i + k]), int(following[i + k])))
         flux.append(np.stack(flux_rows))
         if depth is not None:
             depth.append(np.stack(depth_rows))

@@ -61,7 +61,37 @@ def _load(rec):
 
 @pytest.fixture(scope="module")
 def star(tmp_path_factory):
-    return _load(_record(tmp_path_factory.mktemp("star"), "siemens-star", None, duration_s=0.004))
+    tmp = tmp_path_factory.mktemp("star")
+    d = _load(_record(tmp, "siemens-star", None, duration_s=0.004))
+    d["render_dir"] = tmp / "siemens-star"
+    return d
+
+
+def _star_truth(star, angle):
+    """The star's flow for a turn by ``angle`` (rad) about +Z: the image turns by −angle about the principal
+    point (camera looking down −Z with +Y up: image x is world +X, image y is world −Y)."""
+    cx, cy = star["camera"]["cx_px"], star["camera"]["cy_px"]
+    x, y = _pixels()
+    u, v = x - cx, y - cy
+    return np.stack([u * math.cos(angle) + v * math.sin(angle) - u, -u * math.sin(angle) + v * math.cos(angle) - v],
+                    -1)
+
+
+def test_a_slower_ground_truth_rate_gets_flow_over_its_own_interval(star, tmp_path):
+    """Simulated at 500 Hz on passes rendered at 1 kHz: every instant has its pass, and the flow spans 2 ms
+    (the rate `simspad simulate` takes by default is the render's)."""
+    from simspad.cli.simulate import simulate_from_cli
+
+    rec = simulate_from_cli(star["render_dir"], lux=100.0, sensors="frames", start_s=None, duration_s=None, seed=0,
+                            overrides=(), out_path=tmp_path / "500.h5", gt_rate_hz=500.0)
+    d = _load(rec)
+    np.testing.assert_allclose(d["t"], [0.0, 0.002, 0.004])
+    omega = 2 * math.pi  # 60 rpm
+    on = d["instance"][0] == d["names"].index("star")
+    assert np.abs(d["flow"][0][on] - _star_truth(star, omega * 0.002)[on]).max() < 1e-3
+    default = _load(simulate_from_cli(star["render_dir"], lux=100.0, sensors="frames", start_s=None,
+                                      duration_s=None, seed=0, overrides=(), out_path=tmp_path / "d.h5"))
+    np.testing.assert_array_equal(default["flow"], star["flow"])
 
 
 def _pixels():
