@@ -29,6 +29,8 @@ from simspad.io.safe_paths import confined_path
 
 #: Folder of the geometry passes inside a render directory.
 GEOMETRY_DIR = "geometry"
+#: Bytes per pixel of one geometry pass (float32 depth + uint16 instance, stored uncompressed).
+GEOMETRY_BYTES_PER_PX = 6
 #: How instants of the recording and of the render are matched, s.
 TIME_MATCH_S = 1e-9
 

@@ -2,9 +2,9 @@
 must be refused with the figure, not discovered after gigabytes are written.
 
 The estimate counts what is known from the interval and the parameters alone: SPAD bit planes (one bit per pixel
-per bin), frames (uint16 per pixel) and the ground truth (float32 flux and depth per instant, and the geometry a
-render with geometry passes adds: uint16 instance, 2 × float32 flow, uint8 validity, 2 × float32 velocity); events
-depend on the scene and are not counted. Compressed layouts only make the file smaller.
+per bin), frames (uint16 per pixel) and the ground truth (float32 flux and depth per instant); events depend on
+the scene and are not counted, nor is the ground truth's geometry (instances, flow, validity, velocity: stored
+compressed, measured by ``simspad generate --estimate``). Compressed layouts only make the file smaller.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def recording_samples(sensors: dict, duration_s: float, gt_rate_hz: float) -> di
 
 def recording_bytes(samples: dict[str, float], width: int, height: int) -> float:
     """Bytes of the counted streams (events excluded)."""
-    per_row = {"spad": height * math.ceil(width / 8), "frames": 2 * width * height, "gt": 27 * width * height}
+    per_row = {"spad": height * math.ceil(width / 8), "frames": 2 * width * height, "gt": 8 * width * height}
     return sum(n * per_row[k] for k, n in samples.items())
 
 
