@@ -7,7 +7,8 @@ against truths that do not go through SimSPAD's own reprojection code.
 - On the office (a fast hand-held pan) and the fan (spinning blades), the ground-truth image at t + Δt sampled at
   x + flow(x) reproduces the image at t wherever the flow is valid, within the render's own Monte Carlo noise on
   the office and within 1.6 times it on the fan (whose pitched blades change brightness as they turn), where
-  resampling is exact to first order; and the flow explains the motion (no flow, or half a pixel off, is worse).
+  resampling is exact to first order; and the flow is the motion (half a pixel off is worse; on the office, no
+  flow is far worse).
 - The flow equals the finite difference of the recording's own depth, K and poses (an independent pinhole in
   OpenCV's convention), and the instantaneous velocity the derivative of the trajectory's poses.
 
@@ -223,7 +224,10 @@ def test_warping_by_the_flow_predicts_the_next_frame(tmp_path_factory, scene):
         # of the two-seed difference; the fan's pitched blades turn under the cage's shadows and the lights, so
         # their brightness changes along the motion (the motion field is not brightness-constancy flow): 1.0–1.5.
         assert r["flat_with"] <= (1.0 if scene == "office" else 1.6) * r["flat_noise"], r
-        assert r["with"] < 0.75 * r["without"] and r["with"] < 0.9 * r["off"], r  # and it is the motion
+        assert r["with"] < 0.9 * r["off"], r  # the flow is the motion: half a pixel off is clearly worse
+        if scene == "office":  # and it explains the images' change (the fan's blades move < 1 px per interval
+            # while the frozen noise stays put, so there warping buys little over not warping at all)
+            assert r["with"] < 0.75 * r["without"], r
 
 
 def _independent_flow(d, i):
