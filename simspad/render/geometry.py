@@ -22,7 +22,7 @@ from simspad.render.flow import camera_poses, object_poses
 from simspad.render.mitsuba_scene import MitsubaScene
 
 #: Bumped when a geometry pass's pixels for given inputs would change: part of every pass's cache key.
-GEOMETRY_VERSION = 1
+GEOMETRY_VERSION = 2  # 2: unnamed shapes numbered by what they are, not by bounding box alone
 
 
 def _velocity(tr, t: float) -> list[float]:

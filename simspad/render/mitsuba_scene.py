@@ -194,27 +194,33 @@ class MitsubaScene:
         """Instance names (id k ≥ 1 is ``names[k − 1]``) and the table from ``shape_index`` to instance id.
 
         Every shape of the scene is an instance, named by its id, sorted. Shapes without an id get
-        ``_shape<k>``, numbered in the order of their bounding boxes (Mitsuba lists shapes in an order that
-        varies between loads, their geometry does not). ``(names, None)`` when the variant cannot name shapes.
+        ``_shape<k>``, numbered in the order of what they are (class, primitive and vertex counts, surface area,
+        bounding box): Mitsuba lists shapes in an order that varies between loads, and every process that renders
+        geometry passes must give a shape the same id. Unnamed shapes alike in all of these (duplicates) share one
+        instance. ``(names, None)`` when the variant cannot name shapes.
         """
-        named = {sid: s for sid, s in shapes.items() if sid}
-        unnamed = [s for s in self.scene.shapes() if not s.id()]
+        named = {sid: [s] for sid, s in shapes.items() if sid}
 
-        def box(shape):
+        def key(shape):
             b = shape.bbox()
-            return tuple(float(v) for v in (*np.asarray(b.min).ravel(), *np.asarray(b.max).ravel()))
+            counts = (shape.primitive_count(), shape.vertex_count() if hasattr(shape, "vertex_count") else 0)
+            return (shape.class_name(), *counts, round(float(np.asarray(shape.surface_area()).ravel()[0]), 9),
+                    *(float(v) for v in (*np.asarray(b.min).ravel(), *np.asarray(b.max).ravel())))
 
-        unnamed.sort(key=box)
+        unnamed: dict[tuple, list] = {}
+        for shape in self.scene.shapes():
+            if not shape.id():
+                unnamed.setdefault(key(shape), []).append(shape)
         by_name = dict(named)
-        by_name.update({f"_shape{k}": s for k, s in enumerate(unnamed)})
+        by_name.update({f"_shape{k}": unnamed[kk] for k, kk in enumerate(sorted(unnamed))})
         names = sorted(by_name)
         if not names or not self.mi.variant().startswith(("llvm", "cuda")):
             return names, None
         import drjit as dr  # deferred: heavy; only the JIT variants index shapes in a registry
 
-        index = {n: int(np.asarray(dr.reinterpret_array(self.mi.UInt32, self.mi.ShapePtr(s))).ravel()[0])
-                 for n, s in by_name.items()}
-        table = np.zeros(max(index.values()) + 1, dtype=np.uint16)
+        index = {n: [int(np.asarray(dr.reinterpret_array(self.mi.UInt32, self.mi.ShapePtr(s))).ravel()[0])
+                     for s in group] for n, group in by_name.items()}
+        table = np.zeros(max(max(v) for v in index.values()) + 1, dtype=np.uint16)
         for k, n in enumerate(names, start=1):
             table[index[n]] = k
         return names, table
