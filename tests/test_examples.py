@@ -102,3 +102,38 @@ def test_real_captures_example_imports_evaluates_and_ranks_by_star_mtf(tmp_path,
     assert mtf25 == sorted(mtf25, reverse=True) and all(0.2 < m < 1.0 for m in mtf25)
     with h5py.File(tmp_path / "real" / "results" / "reconstructions" / "star_rig_100lx" / "ni.h5") as f:
         assert f["flux"].shape == (20, 96, 96) and np.isfinite(f["flux"][()]).all()
+
+
+def test_torch_dataset_example_yields_each_windows_motion_field(tmp_path, child_env):
+    """A camera sliding past a wall 2 m away, 4 mm per millisecond, f = 30 px: every 2 ms window's flow is
+    f·8 mm/2 m = 0.12 px to the right, valid wherever the point stays in the image (all of a 40-px-wide grid)."""
+    import h5py
+
+    from tests.io.export.conftest import random_events, write_event_recording
+
+    W, H, f = 40, 30, 30.0
+    rng = np.random.default_rng(4)
+    t, x, y, p = random_events(rng, 5_000, 0, 10_000, W, H)
+    rec = write_event_recording(tmp_path / "rec.h5", t, x, y, p, width=W, height=H, t_start_s=0.0, t_end_s=0.01)
+    n = 11
+    poses = np.repeat(np.eye(4)[None], n, axis=0)
+    poses[:, 0, 3] = np.arange(n) * 0.004
+    with h5py.File(rec.path, "r+") as h:
+        h["gt/t"] = np.arange(n) * 1e-3
+        h["gt/flux"] = np.ones((n, H, W), np.float32)
+        h["gt/depth"] = np.full((n, H, W), 2.0, np.float32)
+        h["gt/instance"] = np.ones((n, H, W), np.uint16)
+        h["gt/instance"].attrs["names"] = '["", "wall"]'
+        h["gt/flow"] = np.zeros((n, H, W, 2), np.float32)
+        h["gt/camera_to_world"] = poses
+        h.create_group("camera").attrs.update({"width": W, "height": H, "focal_px": f})
+        h["camera/K"] = np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1]])
+    res = subprocess.run([sys.executable, str(EXAMPLES / "torch_dataset.py"), str(rec.path), "--window-ms", "2",
+                          "--bins", "3", "--flow"], capture_output=True, text=True, timeout=120, env=child_env)
+    assert res.returncode == 0, res.stderr
+    m = re.search(r"flow over each window: mean ([\d.]+) px where valid \(([\d.]+)% of pixels\)", res.stdout)
+    assert m, res.stdout
+    assert float(m.group(1)) == pytest.approx(f * 0.008 / 2.0, abs=1e-4) and float(m.group(2)) == 100.0
+    bad = subprocess.run([sys.executable, str(EXAMPLES / "torch_dataset.py"), str(rec.path), "--window-ms", "1.5",
+                          "--flow"], capture_output=True, text=True, timeout=120, env=child_env)
+    assert bad.returncode == 2 and "not a ground-truth instant" in bad.stderr

@@ -11,7 +11,11 @@ video frame is one instant t of recording time, and shows, in panels of the reco
   ``w = 1 / spad_rate_hz`` (sRGB curve of the fraction, so dim pixels stay visible);
 - **SPAD binary frame**: the single binary frame exposing at t (white = a detection);
 - **frame camera**: the last frame whose exposure ended by t, in DN over full scale (sRGB curve);
-- **events**: polarity accumulated over ``[t − w_e, t)``: red ON, blue OFF, saturating at 3 events.
+- **events**: polarity accumulated over ``[t − w_e, t)``: red ON, blue OFF, saturating at 3 events;
+- **flow** (recordings with geometry): the ground-truth motion field (its instantaneous image velocity) at the
+  ground truth's instant, on a colour wheel (hue: direction, x right = red, y down = yellow-green; saturation:
+  speed up to the clip's 99th percentile of the image speed; pixels whose flow is not valid dimmed to half);
+- **instances**: the instance mask, one fixed colour per scene object (black: nothing hit).
 
 Absent sensors leave their panels out. Labels give the scene, speed, lux, the instant, and each panel's window.
 Memory is one video frame and one window of sensor data, whatever the recording's length: the ground truth,
@@ -131,6 +135,9 @@ class _Sources:
             self.gt_t = rec.gt.t
             self.panels.append("gt")
             self.white = self._white_point(t0, t1)
+            if rec.gt.has_geometry:
+                self.panels += ["flow", "instances"]
+                self.max_speed = self._max_speed(t0, t1)
         if rec.has("spad"):
             ds = rec.h5["spad"]["t_start"]
             self.spad_t0 = float(ds[0]) if ds.shape[0] else 0.0
@@ -160,6 +167,18 @@ class _Sources:
         white = float(np.percentile(finite, 99)) if finite.size else 0.0
         return white if white > 0 else 1.0
 
+    def _max_speed(self, t0: float, t1: float) -> float:
+        """99th percentile of the image speed (px s⁻¹) at up to 16 instants of the span (> 0): the colour wheel's
+        full saturation, fixed for the clip."""
+        idx = np.flatnonzero((self.gt_t >= t0) & (self.gt_t <= t1))
+        if idx.size == 0:
+            idx = np.array([self._gt_index(t0)])
+        pick = np.unique(idx[np.linspace(0, idx.size - 1, min(16, idx.size)).round().astype(int)])
+        speed = np.concatenate([np.hypot(*np.moveaxis(self.rec.gt.velocity(int(i)), -1, 0)).ravel() for i in pick])
+        speed = speed[np.isfinite(speed)]
+        top = float(np.percentile(speed, 99)) if speed.size else 0.0
+        return top if top > 0 else 1.0
+
     def labels(self, t: float) -> list[str]:
         s = self.settings
         out = []
@@ -177,6 +196,10 @@ class _Sources:
                            f"frame {k}, exposure ended {self.frame_t_end[k] * 1e3:.2f} ms")
             elif p == "events":
                 out.append(f"events, last {s.event_window_s * 1e3:g} ms (red ON, blue OFF)")
+            elif p == "flow":
+                out.append(f"motion field (wheel: up to {self.max_speed:.3g} px/s)")
+            elif p == "instances":
+                out.append(f"instances ({len(self.rec.gt.instance_names) - 1} objects)")
         return out
 
     def _gt_index(self, t: float) -> int:
@@ -231,6 +254,41 @@ class _Sources:
         off = np.clip(off / EVENT_SATURATION, 0, 1).reshape(self.H, self.W)
         # white background; ON removes green and blue (red), OFF removes red and green (blue)
         return np.stack([1 - off, 1 - np.maximum(on, off), 1 - on], axis=-1)
+
+
+    def _flow(self, t: float) -> np.ndarray:
+        i = self._gt_index(t)
+        return flow_colours(self.rec.gt.velocity(i), self.max_speed, self.rec.gt.flow_valid(i))
+
+    def _instances(self, t: float) -> np.ndarray:
+        return instance_colours(self.rec.gt.instance(self._gt_index(t)))
+
+
+def flow_colours(flow: np.ndarray, full_scale: float, valid: np.ndarray | None = None) -> np.ndarray:
+    """Colour-wheel image ``[H, W, 3]`` in 0–1 of a flow field ``[H, W, 2]`` (x right, y down): hue is the
+    direction (0°, red, along +x; angles turn from +x towards +y, i.e. clockwise on screen), saturation the length
+    over ``full_scale`` (clipped at 1), value 1; half value where ``valid`` is False; black where undefined."""
+    from matplotlib.colors import hsv_to_rgb  # deferred: matplotlib is heavy and only the preview draws
+
+    f = np.asarray(flow, np.float64)
+    finite = np.all(np.isfinite(f), axis=-1)
+    f = np.where(finite[..., None], f, 0.0)
+    hue = (np.arctan2(f[..., 1], f[..., 0]) / (2 * np.pi)) % 1.0
+    sat = np.clip(np.hypot(f[..., 0], f[..., 1]) / float(full_scale), 0.0, 1.0)
+    val = np.where(finite, 1.0, 0.0)
+    if valid is not None:
+        val = np.where(np.asarray(valid, bool), val, 0.5 * val)
+    return hsv_to_rgb(np.stack([hue, sat, val], axis=-1))
+
+
+def instance_colours(instance: np.ndarray) -> np.ndarray:
+    """``[H, W, 3]`` in 0–1: instance k ≥ 1 gets hue k·φ (golden ratio: neighbouring ids differ), 0 is black."""
+    from matplotlib.colors import hsv_to_rgb  # deferred: matplotlib is heavy and only the preview draws
+
+    ids = np.asarray(instance, np.int64)
+    hue = (ids * 0.6180339887498949) % 1.0
+    sat = np.where(ids % 2 == 0, 0.55, 0.85)
+    return hsv_to_rgb(np.stack([hue, sat, np.where(ids > 0, 0.95, 0.0)], axis=-1))
 
 
 def _grey(v: np.ndarray) -> np.ndarray:

@@ -75,10 +75,14 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
                    "rest by reprojection (directly seen emitters rendered, reflected light warped), rendering blocks or "
                    "whole keyframes where the warps disagree — 1.0–3.6x less render work on the built-in scenes at 64 "
                    "spp, with more events than linear on the office (docs/rendering.md).")
+@click.option("--gt-rate", "gt_rate_hz", type=float, default=defaults.GT_RATE_HZ, show_default=True,
+              help="Ground-truth rate (Hz): a geometry pass (depth, instance ids at the pixel centres) is rendered at "
+                   "ground-truth instant, for the recordings' masks and motion field (`simspad simulate` records "
+                   "ground truth at the default rate; `simspad generate` renders at its evaluation.rate_hz).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
               help="Render directory: new, empty, or a render directory (its cached keyframes are re-used).")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
-           out_dir):
+           gt_rate_hz, out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
 
     SCENE is a built-in scene (fan, office, piano, plant, siemens-star: `simspad scenes` lists them) or a folder
@@ -88,7 +92,7 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
-                              interpolation=interpolation, out_dir=out_dir, progress=True)
+                              interpolation=interpolation, gt_rate_hz=gt_rate_hz, out_dir=out_dir, progress=True)
     click.echo(describe_render(summary))
 
 
@@ -103,13 +107,16 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 @click.option("--set", "overrides", multiple=True, metavar="SENSOR.FIELD=VALUE",
               help="Override a preset field, e.g. --set spad.gate_s=1e-6 (repeatable; presets: swissspad2, "
                    "blackfly_s, prophesee_gen4 — `simspad info` on a recording lists every field).")
+@click.option("--gt-rate", "gt_rate_hz", type=float, default=None,
+              help="Ground-truth rate (Hz); default: the render's geometry-pass rate (its masks and motion field are "
+                   "recorded at those instants), else 1000.")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True, help="Recording (.h5).")
-def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, out_path):
+def simulate(render_dir, lux, sensors, start_s, duration_s, seed, overrides, gt_rate_hz, out_path):
     """Simulate the sensors on a render directory at one lux level and write a recording."""
     from simspad.cli.simulate import simulate_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
     path = simulate_from_cli(render_dir, lux=lux, sensors=sensors, start_s=start_s, duration_s=duration_s,
-                             seed=seed, overrides=overrides, out_path=out_path)
+                             seed=seed, overrides=overrides, out_path=out_path, gt_rate_hz=gt_rate_hz)
     click.echo(f"wrote {path}")
 
 
@@ -237,17 +244,20 @@ def preview(target, out_path, kind, start_s, duration_s, slowdown, fps, spad_rat
 @click.option("--to", "fmt", type=click.Choice(list(EXPORT_FORMATS)), required=True,
               help="; ".join(f"{k}: {v}" for k, v in EXPORT_FORMATS.items()) + ".")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
-              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz); an existing one is "
-                   "replaced only if it is an earlier export of the same format.")
+              help="File to write (dsec .h5, aedat4 .aedat4, evt3 .raw) or directory (npz, dsec-flow); an existing "
+                   "one is replaced only if it is an earlier export of the same format.")
 @click.option("--spad-packing", "packing", type=click.Choice(list(EXPORT_PACKINGS)), default="packed",
               show_default=True, help="npz: SPAD bits 8 pixels a byte (as stored) or one uint8 0/1 per pixel.")
 @click.option("--frames-format", type=click.Choice(list(EXPORT_FRAME_FORMATS)), default="png", show_default=True,
               help="npz: one 16-bit PNG per frame, or one multi-page TIFF stack.")
-def export(recording, fmt, out_path, packing, frames_format):
-    """Export RECORDING (.h5) to a format other tools read (DSEC, AEDAT 4, EVT 3.0, npz/PNG/EXR)."""
+@click.option("--flow-stride", type=click.IntRange(min=1), default=1, show_default=True,
+              help="dsec-flow: ground-truth intervals per flow map (DSEC's maps span 100 ms: 100 at 1 kHz).")
+def export(recording, fmt, out_path, packing, frames_format, flow_stride):
+    """Export RECORDING (.h5) to a format other tools read (DSEC, AEDAT 4, EVT 3.0, npz/PNG/EXR, DSEC flow)."""
     from simspad.cli.export import export_from_cli  # deferred: `simspad --help` stays 0.25 s (pipeline: 1–3 s)
 
-    export_from_cli(recording, fmt, out_path, packing=packing, frames_format=frames_format)
+    export_from_cli(recording, fmt, out_path, packing=packing, frames_format=frames_format,
+                    flow_stride=flow_stride)
 
 
 @cli.command(name="import")

@@ -79,6 +79,13 @@ def describe_recording(path) -> str:
             rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
             lines.append(f"  gt          {len(t)} sharp frames at {rate:.4g} Hz, {format_bytes(_group_bytes(rec.h5, 'gt'))}"
                          + (", depth" if "gt/depth" in rec.h5 else ""))
+            if rec.gt.has_geometry:
+                cam = rec.gt.camera or {}
+                moving = rec.gt.object_names
+                lines.append(f"  geometry    {len(rec.gt.instance_names) - 1} instances, flow + validity + velocity, "
+                             f"pinhole f = {float(cam.get('focal_px', float('nan'))):.4g} px "
+                             f"(x fov {float(cam.get('x_fov_deg', float('nan'))):.4g}°)"
+                             + (f", moving: {', '.join(moving)}" if moving else ""))
         lines.append("  sensors")
         if rec.has("spad"):
             lines += _spad_lines(rec, n_px, dur)

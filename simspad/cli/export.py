@@ -12,6 +12,7 @@ import click
 
 from simspad.errors import SimSpadError
 from simspad.io.atomic import check_output_file, starts_with
+from simspad.io.export import DIRECTORY_FORMATS
 from simspad.io.export.dispatch import export_recording
 
 
@@ -30,7 +31,7 @@ _OWN_FILES = {"dsec": _is_dsec_file, "aedat4": starts_with(b"#!AER-DAT4.0"),
               "evt3": starts_with(b"% evt 3.0", within=512)}
 
 
-def export_from_cli(recording, fmt: str, out, *, packing: str, frames_format: str) -> Path:
+def export_from_cli(recording, fmt: str, out, *, packing: str, frames_format: str, flow_stride: int = 1) -> Path:
     """The ``simspad export`` command: check the paths, export, say what was written.
 
     An existing ``out`` is replaced only when it is an earlier export of the same format (an npz folder: see
@@ -40,14 +41,17 @@ def export_from_cli(recording, fmt: str, out, *, packing: str, frames_format: st
         raise SimSpadError("no such recording file", path=recording)
     if out.resolve() == recording.resolve():
         raise SimSpadError("--out would overwrite the recording being exported", path=out, field="--out")
-    if fmt == "npz" and out.exists() and not out.is_dir():
-        raise SimSpadError("npz export writes a directory, and a file of that name exists", path=out, field="--out")
-    if fmt != "npz" and out.is_dir():
+    if fmt in DIRECTORY_FORMATS and out.exists() and not out.is_dir():
+        raise SimSpadError(f"{fmt} export writes a directory, and a file of that name exists", path=out,
+                           field="--out")
+    if fmt not in DIRECTORY_FORMATS and out.is_dir():
         raise SimSpadError(f"{fmt} export writes a file, and a directory of that name exists", path=out,
                            field="--out")
-    if fmt != "npz":
+    if fmt in _OWN_FILES:
         check_output_file(out, recognise=_OWN_FILES[fmt], what=f"a file of `simspad export --to {fmt}`")
     options = {"packing": packing, "frames_format": frames_format} if fmt == "npz" else {}
+    if fmt == "dsec-flow":
+        options = {"stride": flow_stride}
     path = export_recording(recording, fmt, out, **options)
     click.echo(f"wrote {path}")
     return path

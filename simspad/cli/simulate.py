@@ -7,13 +7,16 @@ The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); th
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from pathlib import Path
 
+from simspad import defaults
 from simspad.errors import SimSpadError
 from simspad.io.atomic import check_output_file
 from simspad.io.recording.layout import FORMAT as RECORDING_FORMAT
+from simspad.io.render_dir import TIMELINE_FILE
 from simspad.sensors.presets import SENSOR_KINDS, sensor_params
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
@@ -84,8 +87,9 @@ def _is_recording(path: Path) -> bool:
 
 
 def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | None, duration_s: float | None,
-                      seed: int, overrides, out_path) -> Path:
-    """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`."""
+                      seed: int, overrides, out_path, gt_rate_hz: float | None = None) -> Path:
+    """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`
+    (ground truth at ``gt_rate_hz``; None: the render's geometry-pass rate, else the default)."""
     if lux is None or not math.isfinite(lux) or lux <= 0:
         raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="--lux")
     kinds = parse_sensor_list(sensors)
@@ -99,5 +103,20 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
     if seed is None or seed < 0 or seed >= 2**64:
         raise SimSpadError(f"must be an integer in [0, 2**64), got {seed!r}", field="--seed")
     check_output_file(out_path, recognise=_is_recording, what="a SimSPAD recording")
-    settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed)
+    if gt_rate_hz is None:
+        gt_rate_hz = _render_gt_rate(render_dir)
+    elif not (math.isfinite(gt_rate_hz) and gt_rate_hz > 0):
+        raise SimSpadError(f"must be a finite number of Hz > 0, got {gt_rate_hz!r}", field="--gt-rate")
+    settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed,
+                                 gt_rate_hz=gt_rate_hz)
     return simulate_recording(render_dir, out_path, settings, progress=sys.stderr.isatty())
+
+
+def _render_gt_rate(render_dir) -> float:
+    """The rate of the render's geometry passes (``timeline.json``'s ``geometry.rate_hz``), else the default."""
+    try:
+        rate = json.loads((Path(render_dir) / TIMELINE_FILE).read_text()).get("geometry", {}).get("rate_hz")
+    except (OSError, ValueError, AttributeError):
+        rate = None  # a missing or broken render directory is reported by the simulation, naming the file
+    return float(rate) if isinstance(rate, (int, float)) and not isinstance(rate, bool) and rate > 0 \
+        else defaults.GT_RATE_HZ

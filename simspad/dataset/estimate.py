@@ -47,6 +47,7 @@ from simspad.dataset.executors import (
 )
 from simspad.dataset.plan import make_plan
 from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write_exr
+from simspad.io.geometry import GEOMETRY_BYTES_PER_PX
 from simspad.io.recording import open_recording
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
@@ -415,6 +416,8 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         render_cpu += per_kf * (n + 1)  # and its noise probe: keyframe 0 once more (the render-noise budget)
         largest = max(largest, per_kf * (n + 1))
         renders_bytes += int(cost.exr_bytes_per_px * w * h * (n + 1))
+        # the geometry passes at the ground-truth instants (uncompressed float32 depth + uint16 instance per pixel)
+        renders_bytes += GEOMETRY_BYTES_PER_PX * w * h * len(rp.timeline.get("geometry", {}).get("instants", ()))
         if cost.rss_bytes_per_mp_spp is not None and cost.process_rss_bytes is not None:
             render_rss = max(render_rss or 0.0,
                              cost.process_rss_bytes + cost.rss_bytes_per_mp_spp * w * h / 1e6 * seq.spp)

@@ -41,7 +41,14 @@ from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_plan import RenderPlan
-from simspad.render.renderer import link_shared_keyframes, load_scene, plan_render, render_keyframes
+from simspad.render.geometry import missing_geometry, owned_instants
+from simspad.render.renderer import (
+    link_shared_keyframes,
+    load_scene,
+    plan_render,
+    render_keyframes,
+    render_missing_geometry,
+)
 from simspad.render.settings import RenderSettings
 from simspad.render.warp_render import chunk_result, render_noise_probe, render_with_warps
 from simspad.sensors.presets import SpadParams
@@ -79,7 +86,7 @@ def render_settings_of(task) -> RenderSettings:
     seq = task.sequence
     return RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s, resolution=tuple(seq.resolution),
                           spp=seq.spp, max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=task.seed,
-                          interpolation=seq.interpolation)
+                          interpolation=seq.interpolation, gt_rate_hz=task.gt_rate_hz)
 
 
 def _set_render_threads(threads: int | None) -> None:
@@ -174,7 +181,10 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         n_linked = 0 if task.prefix is None else link_shared_keyframes(render_plan, indices,
                                                                        Path(out_dir) / task.prefix.rel_dir, final)
         n_rendered, n_reused = 0, n_linked
-        if n_linked < len(indices):  # else nothing left to render: no scene to load
+        geometry = render_plan.timeline.get("geometry")
+        geometry_todo = missing_geometry(geometry, owned_instants(render_plan.times_s, geometry, indices), final,
+                                         render_plan.width, render_plan.height)
+        if n_linked < len(indices) or geometry_todo:  # else nothing left to render: no scene to load
             done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=final,
                                     loaded=_cached_scene(seq, task.speed_factor, render_plan))
             n_rendered, n_reused = len(done.frame_times_s), done.n_reused
@@ -234,6 +244,9 @@ def run_warp_chunk(task, plan: dict, anchors: list[int], out_dir: str, env: dict
         # the driver counts the keyframes of finished chunks: no bar here
         done = render_with_warps(loaded.ms, loaded.ts, render_plan, Path(out_dir) / task.rel_dir, loaded.counter,
                                  tqdm(disable=True), anchors=list(anchors))
+        # The geometry passes these keyframes own (the last keyframe's only in the chunk that ends there).
+        owners = range(anchors[0], anchors[-1] + (anchors[-1] == render_plan.n_keyframes - 1))
+        render_missing_geometry(render_plan, owners, Path(out_dir) / task.rel_dir, loaded)
         return {"ok": True, "warp": chunk_result(done, anchors[0], anchors[-1]),
                 "n_rendered": len(done.frame_times_s), "seconds": time.perf_counter() - t0,
                 "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}

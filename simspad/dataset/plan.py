@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
-from simspad import __version__
+from simspad import __version__, defaults
 from simspad.dataset.directory import RENDERS_DIR, recording_rel_path
 from simspad.dataset.portable import portable_sequence, portable_trajectory
 from simspad.dataset.spec_hashing import canonical_json, sequence_hash, spec_hash
@@ -28,7 +28,7 @@ from simspad.physics.seeding import child_seed
 from simspad.scenes.library import resolve_scene
 
 #: Bump when the job's output for an unchanged spec would change (part of every recording and render hash).
-JOB_SCHEME_VERSION = 1
+JOB_SCHEME_VERSION = 2  # 2: renders carry geometry passes at the ground-truth instants; recordings their flow
 
 
 @dataclass(frozen=True)
@@ -43,6 +43,8 @@ class RenderTask:
     #: The same sequence's render at the next slower speed, whose keyframes are this render's first ones (the
     #: same poses, seed and settings: :func:`shares_keyframes`), or None.
     prefix: "RenderTask | None" = None
+    #: Ground-truth rate, Hz: the render draws a geometry pass (depth, instance ids) at each ground-truth instant.
+    gt_rate_hz: float = defaults.GT_RATE_HZ
 
 
 @dataclass(frozen=True)
@@ -131,14 +133,15 @@ def _render_task(spec, seq, k: float, versions: dict, prefix: RenderTask | None 
     ``prefix`` (the next slower speed's render) its first keyframes are the prefix's, so it takes the prefix's
     seed (the same pixels) and its hash depends on the prefix's."""
     seed = _render_seed(spec.seed, seq.name, k) if prefix is None else prefix.seed
-    key = {"render": sequence_hash(seq), "seed": seed, "versions": versions}
+    key = {"render": sequence_hash(seq), "seed": seed, "versions": versions,
+           "gt_rate_hz": float(spec.evaluation.rate_hz)}
     if k != 1.0:
         key["speed_factor"] = k
     if prefix is not None:
         key["prefix"] = prefix.render_hash
     render_hash = spec_hash(key)
     return RenderTask(seq, render_hash, f"{RENDERS_DIR}/{seq.name}{speed_suffix(k)}-{render_hash[:12]}", seed,
-                      speed_factor=k, prefix=prefix)
+                      speed_factor=k, prefix=prefix, gt_rate_hz=float(spec.evaluation.rate_hz))
 
 
 def _recording_task(spec, seq, k: float, lux: float, render: RenderTask, seq_hash: str, scene: str, sensors,

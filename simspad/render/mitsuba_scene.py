@@ -157,6 +157,16 @@ class MitsubaScene:
             "sampler": {"type": "independent", "sample_count": DEPTH_SPP},
         })
         self.depth_sensor_params = mi.traverse(self.depth_sensor)
+        # Geometry passes (ground-truth depth, instances, motion field): one sample at each pixel's centre, so a
+        # pixel's depth is that of the ray the pinhole model assigns it (stratified, unjittered: no seed).
+        self.geometry_sensor = mi.load_dict({
+            "type": "perspective", "fov": self.x_fov_deg, "fov_axis": "x", "near_clip": near, "far_clip": far,
+            "to_world": mi.ScalarTransform4f(self.rest_camera_to_world),
+            "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "luminance",
+                     "component_format": "float32", "rfilter": {"type": "box"}},
+            "sampler": {"type": "stratified", "sample_count": 1, "jitter": False},
+        })
+        self.geometry_sensor_params = mi.traverse(self.geometry_sensor)
         self.depth_integrator = mi.load_dict({"type": "aov", "aovs": "dd.y:depth"})
         self.depth_id_integrator = mi.load_dict({"type": "aov", "aovs": "dd.y:depth,sh:shape_index"})
         self.emission_integrator = None  # made on the first render_emission()
@@ -171,6 +181,7 @@ class MitsubaScene:
         self.object_names = sorted(self.objects)
         self._object_id_of_shape = self._object_id_lookup(shapes)
         self._emitter_of_shape = self._emitter_lookup(shapes)
+        self.instance_names, self._instance_of_shape = self._instance_lookup(shapes)
         self.focal_px = focal_length_px(self.x_fov_deg, width)
         self.width, self.height, self.spp = width, height, spp
         self.block_px = block_size_px(width, height)  # blocks of render_radiance_block
@@ -191,6 +202,57 @@ class MitsubaScene:
         for k, name in enumerate(self.object_names, start=1):
             table[index[name]] = k
         return table
+
+    def _instance_lookup(self, shapes: dict) -> tuple[list[str], np.ndarray | None]:
+        """Instance names (id k ≥ 1 is ``names[k − 1]``) and the table from ``shape_index`` to instance id.
+
+        Every shape of the scene is an instance, named by its id, sorted. Shapes without an id get
+        ``_shape<k>``, numbered in the order of what they are (class, primitive and vertex counts, surface area,
+        bounding box): Mitsuba lists shapes in an order that varies between loads, and every process that renders
+        geometry passes must give a shape the same id. Unnamed shapes alike in all of these (duplicates) share one
+        instance. ``(names, None)`` when the variant cannot name shapes.
+        """
+        named = {sid: [s] for sid, s in shapes.items() if sid}
+
+        def key(shape):
+            b = shape.bbox()
+            counts = (shape.primitive_count(), shape.vertex_count() if hasattr(shape, "vertex_count") else 0)
+            return (shape.class_name(), *counts, round(float(np.asarray(shape.surface_area()).ravel()[0]), 9),
+                    *(float(v) for v in (*np.asarray(b.min).ravel(), *np.asarray(b.max).ravel())))
+
+        unnamed: dict[tuple, list] = {}
+        for shape in self.scene.shapes():
+            if not shape.id():
+                unnamed.setdefault(key(shape), []).append(shape)
+        by_name = dict(named)
+        by_name.update({f"_shape{k}": unnamed[kk] for k, kk in enumerate(sorted(unnamed))})
+        names = sorted(by_name)
+        if not names or not self.mi.variant().startswith(("llvm", "cuda")):
+            return names, None
+        import drjit as dr  # deferred: heavy; only the JIT variants index shapes in a registry
+
+        index = {n: [int(np.asarray(dr.reinterpret_array(self.mi.UInt32, self.mi.ShapePtr(s))).ravel()[0])
+                     for s in group] for n, group in by_name.items()}
+        table = np.zeros(max(max(v) for v in index.values()) + 1, dtype=np.uint16)
+        for k, n in enumerate(names, start=1):
+            table[index[n]] = k
+        return names, table
+
+    @property
+    def names_instances(self) -> bool:
+        """Whether :meth:`render_geometry` can tell shapes apart (JIT variants)."""
+        return self._instance_of_shape is not None
+
+    def render_geometry(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Depth Z (float32, m, ``inf`` where nothing is hit) and instance id (uint16, 0 where nothing is hit) at
+        every pixel centre, at the current pose: one unjittered sample per pixel, so no seed. None when the
+        variant cannot name shapes (scalar)."""
+        if self._instance_of_shape is None:
+            return None
+        img = np.array(self.mi.render(self.scene, self.params, sensor=self.geometry_sensor,
+                                      integrator=self.depth_id_integrator, seed=0, spp=1), dtype=np.float32)
+        ray, shape = img[..., 0], np.rint(img[..., 1]).astype(np.int64)
+        return self._z_from_ray(ray), _lookup(self._instance_of_shape, shape, ray > 0)
 
     def _registry_index(self, shapes: dict) -> dict | None:
         """Each shape's registry index, the value of Mitsuba's ``shape_index`` AOV on it (JIT variants); None when
@@ -232,7 +294,7 @@ class MitsubaScene:
         mi = self.mi
         self._pose = np.asarray(camera_to_world, dtype=np.float64)
         pose = mi.ScalarTransform4f(self._pose)
-        for params in (self.sensor_params, self.depth_sensor_params):
+        for params in (self.sensor_params, self.depth_sensor_params, self.geometry_sensor_params):
             params["to_world"] = pose
             params.update()
         if not object_poses:

@@ -50,6 +50,13 @@ from simspad.render.flow import (
     object_poses,
     predicted_flow_fn,
 )
+from simspad.render.geometry import (
+    missing_geometry,
+    owned_instants,
+    plan_geometry,
+    remove_stale_geometry,
+    render_geometry,
+)
 from simspad.render.keyframe_files import (
     frame_is_intact,
     frame_names,
@@ -81,8 +88,8 @@ from simspad.render.warp_render import (
 from simspad.scenes.library import content_hash, resolve_scene
 
 __all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
-           "load_scene", "plan_render", "render_keyframes", "render_probe", "render_sequence", "select_variant",
-           "with_warp_results"]
+           "load_scene", "plan_render", "render_keyframes", "render_missing_geometry", "render_probe",
+           "render_sequence", "select_variant", "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
 RENDERER_VERSION = 6  # 6: Z measured from the camera centre (was: near-clip plane); object_id channel
@@ -221,6 +228,9 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
                   "animated_objects": ms.object_names, "simspad_renderer_version": RENDERER_VERSION},
         schedule=schedule,
     )
+    geometry = plan_geometry(ts, ms, t0, t1, settings.gt_rate_hz, base_key)
+    if geometry is not None:
+        timeline["geometry"] = geometry
     return RenderPlan(times_s=tuple(float(t) for t in times), names=tuple(names), camera_to_world=tuple(cam_poses),
                       width=width, height=height, spp=spp, seed=seed, variant=loaded.variant,
                       scene_hash=base_key["scene"], trajectory_hash=loaded.traj_hash, timeline=timeline,
@@ -305,7 +315,10 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     # A cached keyframe is decoded once here: a damaged one is rendered again, not re-used.
     paths = {i: out_dir / plan.names[i] for i in indices}
     todo = {i for i, path in paths.items() if not path.is_file() or not frame_is_intact(path)}
-    if todo and loaded is None:
+    geometry = plan.timeline.get("geometry")
+    geometry_todo = missing_geometry(geometry, owned_instants(plan.times_s, geometry, indices), out_dir,
+                                     plan.width, plan.height)
+    if (todo or geometry_todo) and loaded is None:
         loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
     if loaded is not None:
         _check_same_inputs(plan, loaded)
@@ -316,7 +329,19 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), paths[i], i in todo,
                {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world else None)
               for i in indices]
-    return _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
+    done = _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
+    if geometry_todo:  # the geometry passes at the ground-truth instants these keyframes own
+        render_geometry(loaded.ms, geometry, geometry_todo, out_dir)
+    return done
+
+
+def render_missing_geometry(plan: RenderPlan, keyframe_indices, out_dir, loaded: LoadedScene) -> int:
+    """Render the geometry passes that the keyframes ``keyframe_indices`` own and that ``out_dir`` lacks (warp
+    renders, whose keyframes are synthesized rather than rendered by :func:`render_keyframes`)."""
+    geometry = plan.timeline.get("geometry")
+    todo = missing_geometry(geometry, owned_instants(plan.times_s, geometry, keyframe_indices), Path(out_dir),
+                            plan.width, plan.height)
+    return render_geometry(loaded.ms, geometry, todo, Path(out_dir)) if todo else 0
 
 
 def render_probe(scene, trajectory, plan: RenderPlan, *, out_dir, loaded: LoadedScene | None = None) -> bool:
@@ -347,9 +372,15 @@ def finalize_render(plan: RenderPlan, out_dir) -> Path:
     if missing:
         raise SimSpadError(f"{len(missing)} of {plan.n_keyframes} keyframes not rendered yet (first: {missing[0]})",
                            path=out_dir)
+    geometry = [g["file"] for g in plan.timeline.get("geometry", {}).get("instants", [])]
+    missing = [name for name in geometry if not (out_dir / name).is_file()]
+    if missing:
+        raise SimSpadError(f"{len(missing)} of {len(geometry)} geometry passes not rendered yet (first: "
+                           f"{missing[0]})", path=out_dir)
     path = write_timeline_json(out_dir, width=plan.width, height=plan.height, keyframes=plan.keyframes(),
                                **plan.timeline, render_noise=measure_render_noise(plan, out_dir))
     remove_stale_frames(out_dir, set(plan.names) | {noise_probe_name(plan)})
+    remove_stale_geometry(out_dir, set(geometry))
     return path
 
 
@@ -430,6 +461,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     probe_s = None
     if plan.warp is not None:
         done, plan = _render_warped(plan, loaded, out_dir, progress)
+        render_missing_geometry(plan, range(plan.n_keyframes), out_dir, loaded)
     else:
         done = render_keyframes(scene, trajectory, plan, range(plan.n_keyframes), out_dir=out_dir,
                                 progress=progress, loaded=loaded)

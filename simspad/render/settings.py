@@ -60,6 +60,10 @@ class RenderSettings:
         With ``"warp"``: a synthesized keyframe whose two warps disagree by more than this many times a render's
         Monte Carlo noise (relative RMS of their luminance + hole fraction) makes the renderer render the
         keyframes between for real.
+    gt_rate_hz : float or None
+        Rate of the ground-truth instants (the sensors' evaluation rate, Hz): a geometry pass (depth and instance
+        ids at the pixel centres, :mod:`simspad.render.geometry`) is rendered at each, on the grid
+        ``start_s + k / gt_rate_hz``; None renders none.
     warp_emission : bool
         With ``"warp"``: warp only reflected light and render the directly visible emission of the keyframes
         next to an emitter in view (a depth-1 pass: 7 % of an office render), when the scene's integrator allows
@@ -77,6 +81,7 @@ class RenderSettings:
     warp_stride: int = WARP_STRIDE
     warp_threshold: float = WARP_THRESHOLD
     warp_emission: bool = True
+    gt_rate_hz: float | None = defaults.GT_RATE_HZ
 
     def checked_size(self) -> tuple[int, int]:
         """Check every field; return (width, height) in pixels.
@@ -120,6 +125,10 @@ class RenderSettings:
             bad("warp_threshold", f"must be a number >= 0, got {self.warp_threshold!r}")
         if not isinstance(self.warp_emission, bool):
             bad("warp_emission", f"must be true or false, got {self.warp_emission!r}")
+        rate = self.gt_rate_hz
+        if rate is not None and not (isinstance(rate, numbers.Real) and not isinstance(rate, bool)
+                                     and math.isfinite(rate) and rate > 0):
+            bad("gt_rate_hz", f"must be a finite number of Hz > 0, got {rate!r}")
         return width, height
 
 

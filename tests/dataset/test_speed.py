@@ -205,10 +205,13 @@ def test_fast_recording_plays_base_trajectory_at_k_t_and_states_its_motion(tmp_p
             np.testing.assert_allclose([kf["camera_to_world"] for kf in f_kf],
                                        base.camera.pose(k * np.array([kf["t"] for kf in f_kf])), rtol=0, atol=1e-9)
         fast_frames[fast.rel_dir] = {kf["file"]: (out / fast.rel_dir / kf["file"]).read_bytes() for kf in f_kf}
-    for r in renders:  # a render directory holds its timeline, keyframe files and noise probe, nothing else
+    for r in renders:  # a render directory holds its timeline, keyframes, noise probe and geometry passes, nothing else
         files = {p.relative_to(out / r.rel_dir).as_posix() for p in (out / r.rel_dir).rglob("*")}
         frames = {kf["file"] for kf in timelines[r.rel_dir]["keyframes"]}
-        expected = {"timeline.json", "frames", timelines[r.rel_dir]["render_noise"]["probe_file"]} | frames
+        geometry = {g["file"] for g in timelines[r.rel_dir]["geometry"]["instants"]}
+        assert len(geometry) == round(timelines[r.rel_dir]["duration_s"] * 1000) + 1  # one per ground-truth instant
+        expected = ({"timeline.json", "frames", "geometry", timelines[r.rel_dir]["render_noise"]["probe_file"]}
+                    | frames | geometry)
         assert files == expected, sorted(files ^ expected)[:5]
 
     # The estimate plans each render as generate does: retimed (the spinning fan at ×4 needs more keyframes, its

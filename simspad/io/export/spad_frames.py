@@ -15,6 +15,14 @@ The directory ``out`` holds::
     gt/000000.exr …      ground truth, 32-bit float OpenEXR: channel Y = sharp photon irradiance
                          (ph s⁻¹ m⁻²), channel Z = depth (m) when the recording has it
     gt/timestamps.csv    index, t_s
+    gt/geometry.npz      (recordings with geometry) instance uint16 [N, H, W] (0: nothing; names in
+                         metadata.json), flow float32 [N, H, W, 2] (forward motion field over the next
+                         ground-truth interval, px, x right, y down; NaN undefined), flow_valid uint8 [N, H, W],
+                         velocity float32 [N, H, W, 2] (px s⁻¹), camera_to_world float64 [N, 4, 4],
+                         object_to_world float64 [N, K, 4, 4] (when objects move), t_s float64 [N]
+
+``metadata.json`` also holds the camera model (``camera``: K in px, field of view, principal point, pixel
+convention) and the instance and object names, when the recording has them.
 
     .simspad-export-npz  the marker: the files this export wrote (simspad.io.output_dirs)
 
@@ -83,6 +91,16 @@ def export_spad_frames(rec, out: Path, *, packing: str = "packed", frames_format
             _write_gt(rec, tmp / "gt")
             meta["groups"]["gt"] = {"format": "exr", "channels": {"Y": "photon irradiance, ph s-1 m-2",
                                                                   "Z": "depth, m"}}
+            if rec.gt.has_geometry:
+                _write_geometry(rec, tmp / "gt" / "geometry.npz")
+                camera = rec.gt.camera
+                camera["K"] = camera["K"].tolist()
+                meta["camera"] = camera
+                meta["groups"]["gt"]["geometry"] = {
+                    "file": "gt/geometry.npz", "instance_names": rec.gt.instance_names,
+                    "objects": rec.gt.object_names, "flow": rec.gt._dataset("flow").attrs["definition"],
+                    "flow_interval_s": float(rec.gt._dataset("flow").attrs["interval_s"]),
+                    "velocity_units": "px s-1", "pose_convention": "mitsuba: camera looks along +Z, up +Y, +X left"}
         (tmp / "metadata.json").write_text(json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n")
     return out
 
@@ -158,6 +176,26 @@ def _write_gt(rec, directory: Path) -> None:
             channels["Z"] = depth
         write_exr(directory / f"{i:06d}.exr", channels)
     _write_csv(directory / "timestamps.csv", ("index", "t_s"), np.column_stack([np.arange(t.size), t]))
+
+
+def _write_geometry(rec, path: Path, rows: int = 16) -> None:
+    """The ground truth's geometry as one uncompressed ``.npz``, streamed ``rows`` instants at a time."""
+    gt, H, W = rec.gt, rec.height, rec.width
+    n = gt.t.size
+
+    def blocks(read):
+        return (read(slice(i, min(i + rows, n))) for i in range(0, n, rows))
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        _npy_entry(zf, "t_s", np.float64, (n,), [gt.t])
+        _npy_entry(zf, "instance", np.uint16, (n, H, W), blocks(gt.instance))
+        _npy_entry(zf, "flow", np.float32, (n, H, W, 2), blocks(gt.flow))
+        _npy_entry(zf, "flow_valid", np.uint8, (n, H, W), blocks(gt.flow_valid))
+        _npy_entry(zf, "velocity", np.float32, (n, H, W, 2), blocks(gt.velocity))
+        _npy_entry(zf, "camera_to_world", np.float64, (n, 4, 4), [gt.camera_to_world])
+        objects = gt.object_to_world
+        if objects is not None:
+            _npy_entry(zf, "object_to_world", np.float64, objects.shape, [objects])
 
 
 def _write_csv(path: Path, header: tuple[str, ...], rows: np.ndarray) -> None:

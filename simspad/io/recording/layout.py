@@ -3,7 +3,10 @@
 One HDF5 file per sequence × lux::
 
     /             attrs: format, format_version, width, height, duration_s, lux, scene, sequence, spec, …
-    /gt           t [n] s, flux [n,H,W] ph s⁻¹ m⁻², depth [n,H,W] m (optional)
+    /gt           t [n] s, flux [n,H,W] ph s⁻¹ m⁻², depth [n,H,W] m (optional); with geometry passes also
+                  instance [n,H,W] uint16, flow [n,H,W,2] px, flow_valid [n,H,W] uint8, velocity [n,H,W,2] px s⁻¹,
+                  camera_to_world [n,4,4], object_to_world [n,K,4,4] (when objects move)
+    /camera       attrs focal_px, cx_px, cy_px, x_fov_deg, y_fov_deg, …; K [3,3] px (with geometry passes)
     /poses        t [k] s, camera_to_world [k,4,4] (optional)
     /spad         bits [n,H,ceil(W/8)] uint8 (little bit order), t_start [n] s, dcr_cps [H,W]
     /frames       dn [k,H,W] uint16, t_start [k] s, t_end [k] s
@@ -24,6 +27,15 @@ REQUIRED_DATASETS = {
     "spad": ("spad/bits", "spad/t_start", "spad/dcr_cps"),
     "frames": ("frames/dn", "frames/t_start", "frames/t_end"),
     "events": ("events/t", "events/x", "events/y", "events/p", "events/ms_to_idx"),
+}
+#: Datasets a recording may hold besides the required ones (the geometry of a render with geometry passes:
+#: docs/format.md, section 3), by group; when one of a group's geometry datasets is there, all but
+#: ``gt/object_to_world`` (written only when objects move) are.
+OPTIONAL_DATASETS = {
+    "gt": ("gt/depth", "gt/instance", "gt/flow", "gt/flow_valid", "gt/velocity", "gt/camera_to_world",
+           "gt/object_to_world"),
+    "camera": ("camera/K",),
+    "poses": ("poses/t", "poses/camera_to_world"),
 }
 #: Attributes a sensor group must carry when the group is present.
 REQUIRED_GROUP_ATTRS = {
