@@ -430,4 +430,20 @@ def write_preview(recording, out, settings: PreviewSettings = PreviewSettings(),
     return PreviewResult(out, len(shown) if kind != ".png" else 1, size[0], size[1], np.asarray(shown), boxes)
 
 
-__all__ = ["PreviewSettings", "PreviewResult", "write_preview", "iter_preview_frames", "preview_times"]
+#: A leaderboard strip's preview: the first few milliseconds, slowed so that a GIF of a dozen frames shows them.
+SHORT_PREVIEW_S = 0.004
+SHORT_PREVIEW_SLOWDOWN = 250.0
+SHORT_PREVIEW_FPS = 10.0
+
+
+def write_short_preview(recording, out) -> PreviewResult:
+    """A short GIF of ``recording`` for the leaderboard: its first :data:`SHORT_PREVIEW_S` s (all of a shorter
+    one), :data:`SHORT_PREVIEW_SLOWDOWN` times slower at :data:`SHORT_PREVIEW_FPS` frames per second."""
+    with open_recording(recording) as rec:
+        duration = min(SHORT_PREVIEW_S, float(rec.duration_s))
+    settings = PreviewSettings(duration_s=duration, slowdown=SHORT_PREVIEW_SLOWDOWN, fps=SHORT_PREVIEW_FPS)
+    return write_preview(recording, out, settings)
+
+
+__all__ = ["PreviewSettings", "PreviewResult", "write_preview", "write_short_preview", "iter_preview_frames",
+           "preview_times"]

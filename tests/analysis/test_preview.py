@@ -3,6 +3,8 @@ recording's data (the SPAD binary frame at each instant, the events of each wind
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import imageio.v2 as imageio
 import numpy as np
 import pytest
@@ -93,3 +95,20 @@ def test_bad_settings_and_spans_are_one_clear_error(recording, tmp_path, simspad
     ok = simspad_cli.run("preview", recording, "--out", tmp_path / "x.gif", "--duration", "0.002")
     assert ok.returncode == 0, ok.stderr
     assert "wrote" in ok.stdout and (tmp_path / "x.gif").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_the_leaderboard_links_a_short_preview_of_each_strips_recording(simspad_cli, evaluation_dataset, tmp_path):
+    import shutil
+
+    data = Path(shutil.copytree(evaluation_dataset, tmp_path / "data"))
+    assert simspad_cli.run("evaluate", data, "--methods", "ni", "--out", data / "results").returncode == 0
+    res = simspad_cli.run("leaderboard", data / "results", "--out", tmp_path / "board")
+    assert res.returncode == 0, res.stderr
+    md = (tmp_path / "board" / "leaderboard.md").read_text()
+    gifs = sorted((tmp_path / "board" / "leaderboard_strips").glob("*.gif"))
+    assert gifs and all(f"(leaderboard_strips/{g.name})" in md for g in gifs)
+    assert all(f'href="leaderboard_strips/{g.name}"' in (tmp_path / "board" / "leaderboard.html").read_text()
+               for g in gifs)
+    frames = list(imageio.get_reader(gifs[0]))
+    assert len(frames) == 10  # 4 ms at 250× slower and 10 fps

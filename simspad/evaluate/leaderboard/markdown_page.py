@@ -52,7 +52,7 @@ def md_table(header, body, text_columns: int = 2) -> str:
 
 def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[tuple[str, str]],
                     regime: Regime | None = None, regime_files: dict[str, str] | None = None,
-                    strip_note: str | None = None) -> str:
+                    strip_note: str | None = None, previews: dict[str, str] | None = None) -> str:
     lheader, lbody = lux_table(board)
     out = ["# SimSPAD leaderboard", "", md_escape(PREAMBLE), "",
            "## About this board", "", md_escape(ABOUT_NOTE), "", md_table(*about_cells(board), 9), "",
@@ -86,7 +86,10 @@ def render_markdown(board: Board, plot_files: dict[str, str], strip_files: list[
         out += ["", "## Reconstructions at the chosen instant (ground truth first)", ""]
         if strip_note:
             out += [md_escape(strip_note), ""]
-        out += [f"![{md_escape(t)}]({f})" for t, f in strip_files]
+        for t, f in strip_files:
+            out.append(f"![{md_escape(t)}]({f})")
+            if previews and t in previews:
+                out += ["", f"[preview of the recording (GIF: ground truth, SPAD, frames, events)]({previews[t]})", ""]
     out += ["", "## Glossary", "", md_table(["Method", "Name", "Full name", "Sensors", "Source"],
                                             [[(c, False) for c in row] for row in glossary_rows(board)], 5), ""]
     out += [f"- {md_escape(n)}" for n in notes(board)]
