@@ -75,9 +75,15 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
                    "rest by reprojection (directly seen emitters rendered, reflected light warped), rendering blocks or "
                    "whole keyframes where the warps disagree — 1.0–3.6x less render work on the built-in scenes at 64 "
                    "spp, with more events than linear on the office (docs/rendering.md).")
+@click.option("--convergence", type=click.Choice(["off", "cache"]), default="off", show_default=True,
+              help="off: path-trace every pixel of every keyframe at --spp; cache (experimental): converge the diffuse "
+                   "light once into a world-space irradiance cache and trace only --spp camera rays per pixel through "
+                   "their glossy bounces (docs/rendering.md, converged radiance).")
+@click.option("--cache-samples", type=int, default=64, show_default=True,
+              help="With --convergence cache: irradiance estimates per point of the cache's probe views.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
-           out_dir):
+           convergence, cache_samples, out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
 
     SCENE is a built-in scene (fan, office, piano, plant, siemens-star: `simspad scenes` lists them) or a folder
@@ -87,7 +93,8 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
-                              interpolation=interpolation, out_dir=out_dir, progress=True)
+                              interpolation=interpolation, convergence=convergence, cache_samples=cache_samples,
+                              out_dir=out_dir, progress=True)
     click.echo(describe_render(summary))
 
 

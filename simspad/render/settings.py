@@ -30,6 +30,12 @@ INTERPOLATIONS = ("warp", "linear")
 #: docs/rendering.md has every figure and what was tried. Opt in with ``--interpolation warp``
 #: (``interpolation = "warp"`` in a dataset spec).
 DEFAULT_INTERPOLATION = "linear"
+#: Radiance modes: ``"off"`` path-traces every pixel of a keyframe (the reference); ``"cache"`` converges the
+#: diffuse irradiance once per render into a world-space cache and gives each keyframe primary visibility, its
+#: glossy/specular chain and a cache lookup (:mod:`simspad.render.converged`; docs/rendering.md says what it
+#: reaches and why it is opt-in).
+CONVERGENCE_MODES = ("off", "cache")
+DEFAULT_CONVERGENCE = "off"
 
 
 @dataclass(frozen=True)
@@ -64,6 +70,17 @@ class RenderSettings:
         With ``"warp"``: warp only reflected light and render the directly visible emission of the keyframes
         next to an emitter in view (a depth-1 pass: 7 % of an office render), when the scene's integrator allows
         the split (:attr:`simspad.render.mitsuba_scene.MitsubaScene.splits_emission`).
+    convergence : str
+        ``"off"``: every keyframe is path-traced at ``spp``; ``"cache"``: each keyframe traces ``spp`` camera
+        rays per pixel through their glossy/specular bounces and takes the diffuse light from an irradiance cache
+        converged once per render (:mod:`simspad.render.converged`).
+    cache_samples : int
+        With ``"cache"``: estimates of the irradiance at each point the cache's probe views find (the cache's
+        convergence: its relative noise falls as 1/√(cache_samples · points per cell)).
+    cache_cell_px : float
+        With ``"cache"``: the cache's finest cell, in pixel footprints at the probe views' median depth.
+    cache_probes : int
+        With ``"cache"``: probe views, spread evenly over the render's keyframes, that fill the cache.
     """
 
     duration_s: float
@@ -77,6 +94,10 @@ class RenderSettings:
     warp_stride: int = WARP_STRIDE
     warp_threshold: float = WARP_THRESHOLD
     warp_emission: bool = True
+    convergence: str = DEFAULT_CONVERGENCE
+    cache_samples: int = 64
+    cache_cell_px: float = 2.0
+    cache_probes: int = 4
 
     def checked_size(self) -> tuple[int, int]:
         """Check every field; return (width, height) in pixels.
@@ -120,6 +141,17 @@ class RenderSettings:
             bad("warp_threshold", f"must be a number >= 0, got {self.warp_threshold!r}")
         if not isinstance(self.warp_emission, bool):
             bad("warp_emission", f"must be true or false, got {self.warp_emission!r}")
+        if self.convergence not in CONVERGENCE_MODES:
+            bad("convergence", f"must be one of {', '.join(CONVERGENCE_MODES)}, got {self.convergence!r}")
+        if self.convergence != "off" and self.interpolation == "warp":
+            bad("convergence", "a converged render renders every keyframe: use it with interpolation linear")
+        if not (isinstance(self.cache_samples, numbers.Integral) and 1 <= self.cache_samples <= 65536):
+            bad("cache_samples", f"must be an integer in [1, 65536], got {self.cache_samples!r}")
+        if not (isinstance(self.cache_cell_px, numbers.Real) and math.isfinite(self.cache_cell_px)
+                and 0.25 <= self.cache_cell_px <= 64):
+            bad("cache_cell_px", f"must be a number of pixels in [0.25, 64], got {self.cache_cell_px!r}")
+        if not (isinstance(self.cache_probes, numbers.Integral) and 1 <= self.cache_probes <= 256):
+            bad("cache_probes", f"must be an integer in [1, 256], got {self.cache_probes!r}")
         return width, height
 
 
