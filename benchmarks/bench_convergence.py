@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 
-from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.timeline import Timeline
 from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.sensors.events.model import draw_pixel_maps, sensor_current_1lux_e_s, sensor_photocurrent_e_s
@@ -62,7 +61,7 @@ def event_counts(tl: Timeline, lux: float) -> tuple[int, int]:
 
 def keyframe_luminance(tl: Timeline) -> np.ndarray:
     """[K, H, W] luminance of every keyframe."""
-    return np.stack([luminance_from_rgb(tl.sample(t)).astype(np.float64) for t in tl.keyframe_times_s])
+    return np.stack([tl.keyframe(i).astype(np.float64) for i in range(tl.n_keyframes)])
 
 
 def median_rel_error(lum: np.ndarray, ref: np.ndarray) -> float:

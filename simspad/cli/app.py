@@ -79,7 +79,7 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
               help="off: path-trace every pixel of every keyframe at --spp; cache (experimental): converge the diffuse "
                    "light once into a world-space irradiance cache and trace only --spp camera rays per pixel through "
                    "their glossy bounces (docs/rendering.md, converged radiance).")
-@click.option("--cache-samples", type=int, default=64, show_default=True,
+@click.option("--cache-samples", type=int, default=256, show_default=True,
               help="With --convergence cache: irradiance estimates per point of the cache's probe views.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Render directory.")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,

@@ -204,6 +204,16 @@ class ConvergedRenderer:
                                            mi.Point2f(0.5, 0.5))
         return ray
 
+    def _sampler(self, seed: int, n: int):
+        """An independent sampler of ``n`` lanes; the seed is an opaque variable so the kernels that use it are
+        compiled once per process, not once per seed (a literal seed would be baked into each kernel)."""
+        mi, dr = self.mi, self.dr
+        if not hasattr(self, "_sampler_obj"):
+            self._sampler_obj = mi.load_dict({"type": "independent", "sample_count": 1})
+        sampler = self._sampler_obj.clone()
+        sampler.seed(dr.opaque(mi.UInt32, seed), n)
+        return sampler
+
     # ------------------------------------------------------------------------------------------ chain
     def trace_chain(self, ray, seed: int):
         """Follow each camera ray through its first hit and glossy/specular bounces.
@@ -215,8 +225,7 @@ class ConvergedRenderer:
         """
         mi, dr = self.mi, self.dr
         n = dr.width(ray.o)
-        sampler = mi.load_dict({"type": "independent", "sample_count": 1})
-        sampler.seed(seed, n)
+        sampler = self._sampler(seed, n)
         throughput = mi.Color3f(1.0)
         emitted = mi.Color3f(0.0)
         active = mi.Bool(True)
@@ -275,8 +284,7 @@ class ConvergedRenderer:
             return np.zeros((0, 3))
         rep = lambda a: np.repeat(a, n_samples, axis=0).astype(np.float32)  # noqa: E731
         ray = mi.Ray3f(mi.Point3f(*rep(ro).T), mi.Vector3f(*rep(rd).T))
-        sampler = mi.load_dict({"type": "independent", "sample_count": 1})
-        sampler.seed(seed, m * n_samples)
+        sampler = self._sampler(seed, m * n_samples)
         si = scene.ray_intersect(ray)
         active = si.is_valid()
         n_sh = si.sh_frame.n

@@ -95,8 +95,8 @@ class RenderSettings:
     warp_threshold: float = WARP_THRESHOLD
     warp_emission: bool = True
     convergence: str = DEFAULT_CONVERGENCE
-    cache_samples: int = 64
-    cache_cell_px: float = 2.0
+    cache_samples: int = 256
+    cache_cell_px: float = 1.0
     cache_probes: int = 4
 
     def checked_size(self) -> tuple[int, int]:
