@@ -40,6 +40,8 @@ LEVELS = (1, 4, 16)
 N_NORMAL_BINS = 6
 #: Chain vertices followed per camera sample (the first hit plus glossy/specular bounces).
 CHAIN_VERTICES = 3
+#: Lanes (points × estimates) of one irradiance-estimate kernel launch.
+Q_BATCH_LANES = 1 << 21
 _PRIMES = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93,
                     0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53], dtype=np.uint64)
 
@@ -359,19 +361,19 @@ class ConvergedRenderer:
         pos = self.camera_samples(seed)[::stride]
         ray = self._camera_rays(pos)
         _, vertices = self.trace_chain(ray, seed)
-        ps, ns, objs, qs = [], [], [], []
-        for k, v in enumerate(vertices):
-            if v["idx"].size == 0:
-                continue
-            ps.append(self.rest_points(v, object_poses))
-            ns.append(self.rest_normals(v, object_poses))
-            objs.append(v["obj"])
-            qs.append(self.estimate_q(v["ro"], v["rd"], q_samples, _mix(seed, 2000 + k)))
-        if not ps:
+        vertices = [v for v in vertices if v["idx"].size]
+        if not vertices:
             z = np.zeros((0, 3))
             return z, z, np.zeros(0, dtype=np.int64), z, np.zeros(0)
-        q = np.concatenate(qs)
-        return np.concatenate(ps), np.concatenate(ns), np.concatenate(objs), q, np.full(q.shape[0], float(q_samples))
+        # One estimate over every vertex of the view (in batches of a fixed size: one kernel, bounded memory).
+        ro = np.concatenate([v["ro"] for v in vertices])
+        rd = np.concatenate([v["rd"] for v in vertices])
+        per_batch = max(1, Q_BATCH_LANES // q_samples)
+        q = np.concatenate([self.estimate_q(ro[a:a + per_batch], rd[a:a + per_batch], q_samples, _mix(seed, 2000 + a))
+                            for a in range(0, ro.shape[0], per_batch)])
+        return (np.concatenate([self.rest_points(v, object_poses) for v in vertices]),
+                np.concatenate([self.rest_normals(v, object_poses) for v in vertices]),
+                np.concatenate([v["obj"] for v in vertices]), q, np.full(q.shape[0], float(q_samples)))
 
 
 def _power(a, b):
