@@ -136,18 +136,25 @@ def plot(results: list[dict], path: Path) -> None:
               for k, m in r["methods"].items() if k.startswith("brute")]
         ca = [(m["cpu_s"], m["median_error"], np.mean(m["event_ratio_100"] + m["event_ratio_10000"]))
               for k, m in r["methods"].items() if k.startswith("cache")]
+        # Event ratios only where the reference has events enough to divide by (>= 20 over both lux levels).
+        has_events = sum(sum(v) for v in r["ref_events"].values()) >= 20
         line, = axes[0].loglog(*zip(*[(c, e) for c, e, _ in bf]), "o-", label=f"{r['scene']} brute force")
-        axes[1].semilogx(*zip(*[(c, v) for c, _, v in bf]), "o-", color=line.get_color())
+        if has_events:
+            axes[1].semilogx(*zip(*[(c, v) for c, _, v in bf]), "o-", color=line.get_color())
         if ca:
             axes[0].loglog(*zip(*[(c, e) for c, e, _ in ca]), "*", ms=14, color=line.get_color(),
                            label=f"{r['scene']} cache")
-            axes[1].semilogx(*zip(*[(c, v) for c, _, v in ca]), "*", ms=14, color=line.get_color())
+            if has_events:
+                axes[1].semilogx(*zip(*[(c, v) for c, _, v in ca]), "*", ms=14, color=line.get_color())
+    for ax in axes:
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    axes[0].yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     axes[0].axhline(0.03, color="k", ls=":", lw=1)
     axes[0].set_xlabel("render CPU-seconds")
     axes[0].set_ylabel("median per-pixel relative error vs reference")
     axes[1].axhspan(0.9, 1.1, color="0.9")
     axes[1].set_xlabel("render CPU-seconds")
-    axes[1].set_ylabel("noise-free events / reference's (mean of ON, OFF at 100 and 10⁴ lx)")
+    axes[1].set_ylabel("noise-free events ÷ reference's\n(mean of ON, OFF at 100 and 10⁴ lx)")
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -164,7 +171,13 @@ def main(argv=None) -> int:
     parser.add_argument("--cache-samples", type=int, default=64)
     parser.add_argument("--out", type=Path, default=Path("bench_convergence.png"))
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--plot-only", type=Path, nargs="*", default=None,
+                        help="draw the figure from these --json outputs instead of measuring")
     args = parser.parse_args(argv)
+    if args.plot_only:
+        plot([r for path in args.plot_only for r in json.loads(path.read_text())], args.out)
+        print(f"figure: {args.out}")
+        return 0
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     base = RenderSettings(duration_s=args.duration, resolution=(w, h))
     spps = [int(s) for s in args.spp.split(",") if s]

@@ -29,6 +29,7 @@ is averaged).
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -40,6 +41,8 @@ LEVELS = (1, 4, 16)
 N_NORMAL_BINS = 6
 #: Chain vertices followed per camera sample (the first hit plus glossy/specular bounces).
 CHAIN_VERTICES = 3
+#: Path length used where the scene's integrator has none (max_depth = -1: Russian roulette only).
+UNLIMITED_DEPTH = 16
 #: Lanes (points × estimates) of one irradiance-estimate kernel launch.
 Q_BATCH_LANES = 1 << 21
 _PRIMES = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93,
@@ -158,13 +161,7 @@ class ConvergedRenderer:
         self.dr, self.mi, self.ms = dr, mi, ms
         self.spp = int(spp)
         self.fallback_samples = int(fallback_samples)
-        integrator = ms.scene.integrator()
-        depth = int(mi.traverse(integrator).get("max_depth", 6)) if hasattr(integrator, "max_depth") else 6
-        try:
-            depth = int(integrator.max_depth)
-        except AttributeError:
-            pass
-        self.max_depth = depth if depth > 0 else 16
+        self.max_depth = scene_max_depth(ms.scene)
         # The light arriving at a first-hit vertex, continued by Mitsuba's own path tracer for the remaining depth.
         self.sub = mi.load_dict({"type": "path", "max_depth": max(self.max_depth - 1, 1)})
         self.shape_index = self._shape_index_table()
@@ -374,6 +371,14 @@ class ConvergedRenderer:
         return (np.concatenate([self.rest_points(v, object_poses) for v in vertices]),
                 np.concatenate([self.rest_normals(v, object_poses) for v in vertices]),
                 np.concatenate([v["obj"] for v in vertices]), q, np.full(q.shape[0], float(q_samples)))
+
+
+def scene_max_depth(scene) -> int:
+    """The longest path (in segments) of the scene's path integrator, which Mitsuba's Python API exposes only in
+    the integrator's description ("max_depth = 5"); 16 where it is unlimited (-1) or not stated."""
+    match = re.search(r"max_depth\s*=\s*(-?\d+)", str(scene.integrator()))
+    depth = int(match.group(1)) if match else -1
+    return depth if depth > 0 else UNLIMITED_DEPTH
 
 
 def _power(a, b):
