@@ -29,7 +29,9 @@ is averaged).
 from __future__ import annotations
 
 import math
+import os
 import re
+from pathlib import Path
 
 import numpy as np
 
@@ -432,9 +434,6 @@ def build_cache(cr: ConvergedRenderer, poses: list, seed: int, q_samples: int, c
 
 def save_cache(cache: IrradianceCache, path) -> None:
     """Write ``cache`` to ``path`` (.npz) atomically."""
-    import os  # deferred: only here
-    from pathlib import Path  # deferred: only here
-
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     arrays = {"cell_m": np.array(cache.cell_m)}
