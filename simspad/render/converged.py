@@ -122,6 +122,8 @@ class IrradianceCache:
             if todo.size == 0:
                 break
             keys, values, counts = self.keys[level], self.values[level], self.counts[level]
+            if keys.size == 0:  # no probe view saw a surface: every point falls back to its own estimate
+                continue
             h = self.cell_m * level
             c = p[todo] / h - 0.5
             base = np.floor(c).astype(np.int64)
@@ -252,8 +254,7 @@ class ConvergedRenderer:
             throughput *= w_g
             active = hit & (bs_g.pdf > 0) & (dr.max(throughput) > 0)
             ray = si.spawn_ray(si.to_world(bs_g.wo))
-        emitted_np = np.array(emitted, dtype=np.float64).reshape(3, -1).T if False else _to_np3(emitted)
-        return emitted_np, vertices
+        return _to_np3(emitted), vertices
 
     def _vertex_arrays(self, si, ray, wd, hit) -> dict:
         mi, dr = self.mi, self.dr

@@ -104,3 +104,10 @@ def test_converged_office_is_closer_to_the_reference_than_brute_force(tmp_path):
 def _render(out, settings):
     render_sequence("office", None, settings, out_dir=out, progress=False)
     return out
+
+
+def test_an_empty_cache_finds_nothing():
+    empty = IrradianceCache.from_samples(0.1, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64),
+                                         np.zeros((0, 3)), np.zeros(0))
+    q, found = empty.lookup(np.zeros((2, 3)), np.tile([0.0, 0.0, 1.0], (2, 1)), np.zeros(2, dtype=np.int64))
+    assert not found.any() and not q.any()
