@@ -248,12 +248,20 @@ class ConvergedRenderer:
             _, w_d = bsdf.sample(ctx_d, si, u_d, u_d2, hit)
             bs_g, w_g = bsdf.sample(ctx_g, si, u_g, u_g2, hit)
             wd = dr.select(hit, throughput * w_d, 0.0)
+            last = depth + 1 == min(CHAIN_VERTICES, self.max_depth)
+            if not last:
+                throughput *= w_g
+                active = hit & (bs_g.pdf > 0) & (dr.max(throughput) > 0)
+                next_ray = si.spawn_ray(si.to_world(bs_g.wo))
+                # One kernel for this depth: Dr.Jit is lazy, and each array read back to numpy would otherwise
+                # trace the whole chain again; the next depth starts from these stored values.
+                dr.eval(wd, si, ray, hit, emitted, throughput, active, next_ray)
+            else:
+                dr.eval(wd, si, ray, hit, emitted)
             vertices.append(self._vertex_arrays(si, ray, wd, hit))
-            if depth + 1 == min(CHAIN_VERTICES, self.max_depth):
+            if last:
                 break
-            throughput *= w_g
-            active = hit & (bs_g.pdf > 0) & (dr.max(throughput) > 0)
-            ray = si.spawn_ray(si.to_world(bs_g.wo))
+            ray = next_ray
         return _to_np3(emitted), vertices
 
     def _vertex_arrays(self, si, ray, wd, hit) -> dict:
@@ -264,6 +272,7 @@ class ConvergedRenderer:
         n_sh = si.sh_frame.n
         flip = mi.Frame3f.cos_theta(si.wi) < 0
         n_or = dr.select(flip, -n_sh, n_sh)
+        dr.eval(n_or)
         out = {"idx": idx, "weight": _to_np3(wd)[idx], "p": _to_np3(si.p)[idx], "n": _to_np3(n_or)[idx],
                "ro": _to_np3(ray.o)[idx], "rd": _to_np3(ray.d)[idx]}
         if self.shape_index is not None:
@@ -312,6 +321,7 @@ class ConvergedRenderer:
         pdf_b = dr.maximum(dr.dot(n_or, wo), 0.0) * dr.inv_pi
         mis_b = _power(pdf_b, pdf_l2)
         q += dr.select(active, li - le2 * (1.0 - mis_b), 0.0)
+        dr.eval(q)  # one kernel (each channel read back would otherwise trace the paths again)
         out = _to_np3(q).reshape(m, n_samples, 3).mean(axis=1)
         return np.maximum(out, 0.0)
 
