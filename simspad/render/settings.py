@@ -36,7 +36,8 @@ DEFAULT_INTERPOLATION = "linear"
 #: on every built-in scene (median error <= 3 % against a converged reference, noise-free events within 10 %, at
 #: <= 1/4 of the 64-spp linear schedule's CPU). Measured at 48x36 over 10 ms (benchmarks/bench_convergence.py, 64
 #: camera rays, 256 estimates per probe point): office 4.9 % error, events 0.88-1.52x the reference's; plant
-#: 5.0 %, 1.11-1.16x; Siemens star 1.4 %, 1.01-1.02x; 5-25x the CPU of 64-spp path tracing at that size.
+#: 5.0 %, 1.11-1.16x; Siemens star 1.4 %, 1.01-1.02x; fan 1.9 %, 0.94-1.01x; 4-7x the CPU of 64-spp path tracing
+#: at that size (office 11.9 against 3.1 CPU-s, star 4.3 against 0.6).
 #: docs/rendering.md has the table and what was tried.
 CONVERGENCE_MODES = ("off", "cache")
 DEFAULT_CONVERGENCE = "off"
