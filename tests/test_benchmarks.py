@@ -5,6 +5,7 @@ A benchmark that builds its own stand-in of a package type drifts silently: benc
 in benchmarks/; here each such script runs at a size that takes seconds.
 """
 
+import json
 import re
 import subprocess
 import sys
@@ -60,3 +61,18 @@ def test_bench_nedi_times_the_solver_against_the_vectorised_reference_and_they_a
                          timeout=300, env=child_env)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert re.search(r"SciPy vectorised : +576 px .*agree to 1e-9", res.stdout), res.stdout
+
+
+@pytest.mark.slow
+def test_bench_convergence_measures_brute_force_and_the_cache_against_a_reference(child_env, tmp_path):
+    out, table = tmp_path / "wp.png", tmp_path / "wp.json"
+    res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_convergence.py"), "--scenes", "siemens-star",
+                          "--resolution", "16x12", "--duration", "0.002", "--ref-spp", "64", "--spp", "16",
+                          "--cache-spp", "4", "--cache-samples", "16", "--out", str(out), "--json", str(table)],
+                         capture_output=True, text=True, timeout=600, env=child_env)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    (result,) = json.loads(table.read_text())
+    assert set(result["methods"]) == {"brute force 16 spp", "cache 4 spp, 16 q"}
+    for row in result["methods"].values():
+        assert row["cpu_s"] > 0 and 0 < row["median_error"] < 1 and len(row["event_ratio_100"]) == 2
+    assert out.stat().st_size > 10_000

@@ -79,10 +79,16 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
               help="Ground-truth rate (Hz): a geometry pass (depth, instance ids at the pixel centres) is rendered at "
                    "ground-truth instant, for the recordings' masks and motion field (`simspad simulate` records "
                    "ground truth at the default rate; `simspad generate` renders at its evaluation.rate_hz).")
+@click.option("--convergence", type=click.Choice(["off", "cache"]), default="off", show_default=True,
+              help="off: path-trace every pixel of every keyframe at --spp; cache (experimental): converge the diffuse "
+                   "light once into a world-space irradiance cache and trace only --spp camera rays per pixel through "
+                   "their glossy bounces (docs/rendering.md, converged radiance).")
+@click.option("--cache-samples", type=int, default=256, show_default=True,
+              help="With --convergence cache: irradiance estimates per point of the cache's probe views.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
               help="Render directory: new, empty, or a render directory (its cached keyframes are re-used).")
 def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px, min_rate_hz, seed, interpolation,
-           gt_rate_hz, out_dir):
+           gt_rate_hz, convergence, cache_samples, out_dir):
     """Render linear radiance keyframes of SCENE along TRAJECTORY (default: the scene's own).
 
     SCENE is a built-in scene (fan, office, piano, plant, siemens-star: `simspad scenes` lists them) or a folder
@@ -92,7 +98,8 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
-                              interpolation=interpolation, gt_rate_hz=gt_rate_hz, out_dir=out_dir, progress=True)
+                              interpolation=interpolation, gt_rate_hz=gt_rate_hz, convergence=convergence,
+                              cache_samples=cache_samples, out_dir=out_dir, progress=True)
     click.echo(describe_render(summary))
 
 

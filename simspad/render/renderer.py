@@ -43,6 +43,16 @@ from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, render_noise_budget
+from simspad.render.converged import (
+    CACHE_FILE_PREFIX,
+    CHAIN_VERTICES,
+    LEVELS,
+    ConvergedRenderer,
+    build_cache,
+    load_cache,
+    probe_indices,
+    save_cache,
+)
 from simspad.render.flow import (
     camera_poses,
     max_step_flow,
@@ -59,6 +69,7 @@ from simspad.render.geometry import (
 )
 from simspad.render.keyframe_files import (
     frame_is_intact,
+    frame_key,
     frame_names,
     make_out_dir,
     remove_created,
@@ -190,6 +201,9 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
                 "scene": content_hash(info), "trajectory": loaded.traj_hash, "width": width, "height": height,
                 "spp": spp, "seed": seed, "depth_spp": DEPTH_SPP, "sampler": sampler_for(spp),
                 "psf_sigma_px": PSF_SIGMA_PX}
+    convergence = convergence_fields(settings)
+    if convergence is not None:  # (absent when off: a path-traced render's names and timeline stay as they were)
+        base_key["convergence"] = convergence
     # Poses and files of this render's own keyframes; the shared ones are the prefix's, as it rendered them.
     cam_poses = [tuple(tuple(row) for row in p.tolist()) for p in camera_poses(ts, ms.rest_camera_to_world, own)]
     names = frame_names(base_key, own, first_index=n_shared)
@@ -225,7 +239,9 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
                   "depth": "Z: distance along the optical axis, m (inf: no hit)",
                   "max_flow_px": max_flow_px, "min_rate_hz": min_rate_hz, "near_depth_m": near_depth_m,
                   "focal_px": ms.focal_px, "x_fov_deg": ms.x_fov_deg, "camera_id": info.camera_id,
-                  "animated_objects": ms.object_names, "simspad_renderer_version": RENDERER_VERSION},
+                  "animated_objects": ms.object_names, "simspad_renderer_version": RENDERER_VERSION,
+                  **({"convergence": dict(convergence, cache_file=cache_file_name(base_key))}
+                     if convergence is not None else {})},
         schedule=schedule,
     )
     geometry = plan_geometry(ts, ms, t0, t1, settings.gt_rate_hz, base_key)
@@ -329,7 +345,10 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), paths[i], i in todo,
                {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world else None)
               for i in indices]
-    done = _render_frames(loaded, frames, plan.seed, counter, progress, on_frame)
+    converged = None
+    if todo and plan.timeline.get("renderer", {}).get("convergence"):
+        converged = _converged_renderer(plan, loaded, out_dir)
+    done = _render_frames(loaded, frames, plan.seed, counter, progress, on_frame, converged)
     if geometry_todo:  # the geometry passes at the ground-truth instants these keyframes own
         render_geometry(loaded.ms, geometry, geometry_todo, out_dir)
     return done
@@ -358,6 +377,38 @@ def render_probe(scene, trajectory, plan: RenderPlan, *, out_dir, loaded: Loaded
     return render_noise_probe(loaded.ms, loaded.ts, plan, out_dir)
 
 
+def convergence_fields(settings: RenderSettings) -> dict | None:
+    """What a converged render records (``timeline.json`` ``renderer.convergence``, and the keyframes' cache key);
+    None for a path-traced one."""
+    if settings.convergence == "off":
+        return None
+    return {"mode": settings.convergence, "cache_samples": int(settings.cache_samples),
+            "cache_cell_px": float(settings.cache_cell_px), "cache_probes": int(settings.cache_probes),
+            "chain_vertices": CHAIN_VERTICES, "levels": list(LEVELS)}
+
+
+def cache_file_name(base_key: dict) -> str:
+    """The irradiance cache's file name in the render directory, keyed like the keyframes."""
+    return f"{CACHE_FILE_PREFIX}{frame_key(base_key, -1.0)}.npz"
+
+
+def _converged_renderer(plan: RenderPlan, loaded: LoadedScene, out_dir: Path):
+    """The :class:`ConvergedRenderer` of ``plan`` and its cache: read from the render directory, or built from
+    the plan's probe keyframes (the same values in any process) and written there."""
+    fields = plan.timeline["renderer"]["convergence"]
+    cr = ConvergedRenderer(loaded.ms, plan.spp)
+    path = out_dir / fields["cache_file"]
+    cache = load_cache(path) if path.is_file() else None
+    if cache is None:
+        poses = [(np.asarray(plan.camera_to_world[i]),
+                  {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world
+                  else object_poses(loaded.ts, plan.times_s[i]))
+                 for i in probe_indices(plan.n_keyframes, fields["cache_probes"])]
+        cache = build_cache(cr, poses, plan.seed, fields["cache_samples"], fields["cache_cell_px"])
+        save_cache(cache, path)
+    return cr, cache
+
+
 def finalize_render(plan: RenderPlan, out_dir) -> Path:
     """Stage 3: write ``timeline.json`` (which marks the render directory complete) once every keyframe file of
     ``plan`` exists, and delete frames of earlier renders into the same directory that it does not reference.
@@ -381,6 +432,10 @@ def finalize_render(plan: RenderPlan, out_dir) -> Path:
                                **plan.timeline, render_noise=measure_render_noise(plan, out_dir))
     remove_stale_frames(out_dir, set(plan.names) | {noise_probe_name(plan)})
     remove_stale_geometry(out_dir, set(geometry))
+    keep = plan.timeline.get("renderer", {}).get("convergence", {}).get("cache_file")
+    for stale in out_dir.glob(f"{CACHE_FILE_PREFIX}*.npz"):  # caches of earlier converged renders into out_dir
+        if stale.name != keep:
+            stale.unlink(missing_ok=True)
     return path
 
 
@@ -514,9 +569,10 @@ class RenderedFrames(NamedTuple):
 
 
 def _render_frames(loaded: LoadedScene | None, frames: list, seed: int, counter: CompileCounter | None,
-                   progress: bool, on_frame=None) -> RenderedFrames:
+                   progress: bool, on_frame=None, converged=None) -> RenderedFrames:
     """Render and write every ``(index, t, camera_to_world, path, needed)`` of ``frames`` that is ``needed`` (its
-    file is missing or damaged); count the others as re-used."""
+    file is missing or damaged); count the others as re-used. ``converged`` ((ConvergedRenderer, cache)) renders
+    the radiance from the irradiance cache instead of path tracing every pixel."""
     frame_times, compiled, n_reused = [], [], 0
     bar = _progress(len(frames), progress)
     t_render = time.perf_counter()
@@ -526,8 +582,10 @@ def _render_frames(loaded: LoadedScene | None, frames: list, seed: int, counter:
                 n_reused += 1
             else:
                 tic = time.perf_counter()
-                loaded.ms.set_pose(camera_to_world, object_poses(loaded.ts, t) if objects is None else objects)
-                rgb = loaded.ms.render_radiance(seed)
+                poses = object_poses(loaded.ts, t) if objects is None else objects
+                loaded.ms.set_pose(camera_to_world, poses)
+                rgb = (loaded.ms.render_radiance(seed) if converged is None
+                       else converged[0].render(converged[1], seed, poses))
                 depth, object_id = loaded.ms.render_depth_ids(seed)
                 write_frame(path, rgb, depth, object_id)
                 frame_times.append(time.perf_counter() - tic)

@@ -1,0 +1,200 @@
+"""Convergence benchmark: how close each way of rendering a clip comes to a brute-force reference, for its CPU.
+
+For each scene (its default trajectory, a short clip at a small size) it renders
+
+* a **reference**: every keyframe path-traced at ``--ref-spp`` (seed 0), and the same again with seed 1: their
+  difference is the reference's own noise (reported as the median per-pixel relative difference of the two, ÷ √2
+  for one of them), and their mean is what the others are measured against;
+* **brute force** at each of ``--spp`` (the path tracer, ``convergence = "off"``);
+* the **irradiance cache** (``convergence = "cache"``, :mod:`simspad.render.converged`) at ``--cache-spp`` camera
+  rays per pixel and ``--cache-samples`` estimates per probe point;
+
+and reports for each its render CPU-seconds (the process's CPU time for the whole render, cache included), the
+median over keyframes and pixels of the relative luminance error against the reference, and the event counts of
+a noise-free event sensor (shot noise, leak and hot pixels off, the same pixel maps) at 100 and 10⁴ lx, as a
+ratio to the reference's. A work–precision diagram (error and event ratio against CPU-seconds) is saved as a PNG.
+
+Run: ``nice -n 10 python benchmarks/bench_convergence.py --scenes office --resolution 48x36 --duration 0.01``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from simspad.radiance.timeline import Timeline
+from simspad.render.renderer import RenderSettings, render_sequence
+from simspad.sensors.events.model import draw_pixel_maps, sensor_current_1lux_e_s, sensor_photocurrent_e_s
+from simspad.sensors.events.simulator import EventSimulator, iter_knot_chunks
+from simspad.sensors.presets import EventParams
+
+#: The noise-free event sensor: only radiance changes make events (as `simspad simulate --sensors events --set
+#: events.shot_noise_rate_hz_at_1lux=0 --set events.leak_rate_hz=0 --set events.hot_pixel_fraction=0`).
+QUIET_EVENTS = replace(EventParams(), shot_noise_rate_hz_at_1lux=0.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0)
+LUX_LEVELS = (100.0, 1e4)
+
+
+def event_counts(tl: Timeline, lux: float) -> tuple[int, int]:
+    """(ON, OFF) events of the noise-free event sensor over the whole timeline at ``lux``."""
+    flux = tl.photon_flux(lux)
+    params = QUIET_EVENTS
+    maps = draw_pixel_maps(params, (tl.height, tl.width), np.random.default_rng(0))
+    current_1lux = sensor_current_1lux_e_s(float(np.mean(flux.keyframe(0))), lux, params)
+    sim = EventSimulator(params, (tl.height, tl.width), sensor_photocurrent_e_s(flux.sample(tl.t_start), params).ravel(),
+                         tl.t_start, current_1lux, maps)
+    on = off = 0
+    batches = (sim.advance(knot_t, knot_current) for knot_t, knot_current in
+               iter_knot_chunks(flux, tl.t_start, tl.t_end, params))
+    for batch in (*batches, sim.finish()):
+        on += int(np.count_nonzero(batch.polarity == 1))
+        off += int(np.count_nonzero(batch.polarity == 0))
+    return on, off
+
+
+def keyframe_luminance(tl: Timeline) -> np.ndarray:
+    """[K, H, W] luminance of every keyframe."""
+    return np.stack([tl.keyframe(i).astype(np.float64) for i in range(tl.n_keyframes)])
+
+
+def median_rel_error(lum: np.ndarray, ref: np.ndarray) -> float:
+    """Median over keyframes and pixels of |lum − ref| / ref (pixels where the reference is black left out)."""
+    ok = ref > 0
+    return float(np.median(np.abs(lum[ok] - ref[ok]) / ref[ok]))
+
+
+def render_timed(scene, settings: RenderSettings, out: Path) -> tuple[Timeline, float]:
+    """Render ``out``; its timeline and the process CPU time the render took, s."""
+    shutil.rmtree(out, ignore_errors=True)
+    tic = time.process_time()
+    render_sequence(scene, None, settings, out_dir=out, progress=False)
+    return Timeline.open(out), time.process_time() - tic
+
+
+def measure(tl: Timeline, cpu_s: float, ref_lum: np.ndarray, ref_events: dict) -> dict:
+    lum = keyframe_luminance(tl)
+    row = {"cpu_s": cpu_s, "n_keyframes": int(lum.shape[0]), "median_error": median_rel_error(lum, ref_lum)}
+    for lux in LUX_LEVELS:
+        on, off = event_counts(tl, lux)
+        ron, roff = ref_events[lux]
+        row[f"events_{lux:g}"] = [on, off]
+        row[f"event_ratio_{lux:g}"] = [on / max(ron, 1), off / max(roff, 1)]
+    return row
+
+
+def bench_scene(name: str, base: RenderSettings, ref_spp: int, spps: list[int], cache_runs: list[dict],
+                work: Path) -> dict:
+    ref_tl, ref_cpu = render_timed(name, replace(base, spp=ref_spp, seed=0), work / f"{name}-ref0")
+    ref2_tl, ref2_cpu = render_timed(name, replace(base, spp=ref_spp, seed=1), work / f"{name}-ref1")
+    lum0, lum1 = keyframe_luminance(ref_tl), keyframe_luminance(ref2_tl)
+    ref_lum = 0.5 * (lum0 + lum1)
+    # The mean of the two seeds is the reference: each one's noise is their difference ÷ √2, the mean's ÷ 2.
+    ref_noise_one = median_rel_error(lum0, lum1) / np.sqrt(2.0)
+    # Events of the reference: the seed-0 render (a timeline of the mean would need its own render directory).
+    ref_events = {lux: event_counts(ref_tl, lux) for lux in LUX_LEVELS}
+    ref2_events = {lux: event_counts(ref2_tl, lux) for lux in LUX_LEVELS}
+    out = {"scene": name, "n_keyframes": int(lum0.shape[0]), "ref_spp": ref_spp, "ref_cpu_s": ref_cpu,
+           "ref_noise_one_seed": ref_noise_one, "ref_events": {f"{k:g}": v for k, v in ref_events.items()},
+           "ref_seed1_events": {f"{k:g}": v for k, v in ref2_events.items()}, "methods": {}}
+    print(f"{name}: {out['n_keyframes']} keyframes; reference {ref_spp} spp: {ref_cpu:.1f} CPU-s, own noise "
+          f"{100 * ref_noise_one:.2f} % (one seed), events 100 lx {ref_events[100.0]}, 1e4 lx {ref_events[1e4]} "
+          f"(seed 1: {ref2_events[100.0]}, {ref2_events[1e4]})", flush=True)
+    for spp in spps:
+        tl, cpu = render_timed(name, replace(base, spp=spp), work / f"{name}-bf{spp}")
+        out["methods"][f"brute force {spp} spp"] = row = measure(tl, cpu, ref_lum, ref_events)
+        _print(name, f"brute force {spp} spp", row)
+    for run in cache_runs:
+        label = f"cache {run['spp']} spp, {run['cache_samples']} q"
+        tl, cpu = render_timed(name, replace(base, convergence="cache", **run), work / f"{name}-cache")
+        out["methods"][label] = row = measure(tl, cpu, ref_lum, ref_events)
+        _print(name, label, row)
+    return out
+
+
+def _print(scene: str, label: str, row: dict) -> None:
+    print(f"  {scene:<13} {label:<24} CPU {row['cpu_s']:8.1f} s  median error {100 * row['median_error']:6.2f} %  "
+          f"events/ref 100 lx {row['event_ratio_100'][0]:.2f}/{row['event_ratio_100'][1]:.2f}  "
+          f"1e4 lx {row['event_ratio_10000'][0]:.2f}/{row['event_ratio_10000'][1]:.2f}", flush=True)
+
+
+def plot(results: list[dict], path: Path) -> None:
+    import matplotlib  # deferred: only for the figure
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # deferred: as above
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for r in results:
+        bf = [(m["cpu_s"], m["median_error"], np.mean(m["event_ratio_100"] + m["event_ratio_10000"]))
+              for k, m in r["methods"].items() if k.startswith("brute")]
+        ca = [(m["cpu_s"], m["median_error"], np.mean(m["event_ratio_100"] + m["event_ratio_10000"]))
+              for k, m in r["methods"].items() if k.startswith("cache")]
+        # Event ratios only where the reference has events enough to divide by (>= 20 over both lux levels).
+        has_events = sum(sum(v) for v in r["ref_events"].values()) >= 20
+        line, = axes[0].loglog(*zip(*[(c, e) for c, e, _ in bf]), "o-", label=f"{r['scene']} brute force")
+        if has_events:
+            axes[1].semilogx(*zip(*[(c, v) for c, _, v in bf]), "o-", color=line.get_color())
+        if ca:
+            axes[0].loglog(*zip(*[(c, e) for c, e, _ in ca]), "*", ms=14, color=line.get_color(),
+                           label=f"{r['scene']} cache")
+            if has_events:
+                axes[1].semilogx(*zip(*[(c, v) for c, _, v in ca]), "*", ms=14, color=line.get_color())
+    for ax in axes:
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    axes[0].yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    axes[0].axhline(0.03, color="k", ls=":", lw=1)
+    axes[0].set_xlabel("render CPU-seconds")
+    axes[0].set_ylabel("median per-pixel relative error vs reference")
+    axes[1].axhspan(0.9, 1.1, color="0.9")
+    axes[1].set_xlabel("render CPU-seconds")
+    axes[1].set_ylabel("noise-free events ÷ reference's\n(mean of ON, OFF at 100 and 10⁴ lx)")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", default="office")
+    parser.add_argument("--resolution", default="48x36")
+    parser.add_argument("--duration", type=float, default=0.01)
+    parser.add_argument("--ref-spp", type=int, default=4096)
+    parser.add_argument("--spp", default="16,64,256,1024", help="brute-force samples per pixel, comma-separated")
+    parser.add_argument("--cache-spp", default="16", help="camera rays per pixel of the cache runs")
+    parser.add_argument("--cache-samples", type=int, default=64)
+    parser.add_argument("--out", type=Path, default=Path("bench_convergence.png"))
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--plot-only", type=Path, nargs="*", default=None,
+                        help="draw the figure from these --json outputs instead of measuring")
+    args = parser.parse_args(argv)
+    if args.plot_only:
+        plot([r for path in args.plot_only for r in json.loads(path.read_text())], args.out)
+        print(f"figure: {args.out}")
+        return 0
+    w, h = (int(v) for v in args.resolution.lower().split("x"))
+    base = RenderSettings(duration_s=args.duration, resolution=(w, h))
+    spps = [int(s) for s in args.spp.split(",") if s]
+    cache_runs = [{"spp": int(s), "cache_samples": args.cache_samples} for s in args.cache_spp.split(",") if s]
+    work = Path(tempfile.mkdtemp(prefix="bench_convergence-"))
+    results = []
+    try:
+        for name in args.scenes.split(","):
+            results.append(bench_scene(name, base, args.ref_spp, spps, cache_runs, work))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    plot(results, args.out)
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1))
+    print(f"figure: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
