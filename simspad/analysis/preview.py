@@ -76,6 +76,9 @@ class PreviewSettings:
         Aggregate rate of the SPAD aggregate panel, Hz.
     event_window_s : float
         Accumulation window of the events panel, s.
+    panel_px : int
+        About how many screen pixels the longer side of each panel takes (a recording pixel is an integer number
+        of screen pixels, at least one).
     """
 
     start_s: float | None = None
@@ -84,9 +87,10 @@ class PreviewSettings:
     fps: float = DEFAULT_FPS
     spad_rate_hz: float = DEFAULT_SPAD_RATE_HZ
     event_window_s: float = DEFAULT_EVENT_WINDOW_S
+    panel_px: int = TARGET_PANEL_PX
 
     def check(self) -> None:
-        for name in ("slowdown", "fps", "spad_rate_hz", "event_window_s"):
+        for name in ("slowdown", "fps", "spad_rate_hz", "event_window_s", "panel_px"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise SimSpadError(f"expected a finite number > 0, got {v!r}", field=f"--{name.replace('_', '-')}")
@@ -298,14 +302,14 @@ def _grey(v: np.ndarray) -> np.ndarray:
 class _Canvas:
     """One matplotlib figure reused for every video frame: a title line and one labelled panel per image."""
 
-    def __init__(self, n_panels: int, H: int, W: int, title: str):
+    def __init__(self, n_panels: int, H: int, W: int, title: str, panel_px: int = TARGET_PANEL_PX):
         import matplotlib  # deferred: heavy, and only previews draw
 
         matplotlib.use("Agg")
         from matplotlib.figure import Figure  # deferred: as above
         from matplotlib.backends.backend_agg import FigureCanvasAgg  # deferred: as above
 
-        self.scale = max(1, int(TARGET_PANEL_PX // max(W, H)))
+        self.scale = max(1, int(panel_px // max(W, H)))
         cols = min(n_panels, 3)
         rows = -(-n_panels // cols)
         dpi = 100
@@ -368,7 +372,7 @@ def iter_preview_frames(rec, settings: PreviewSettings, kind: str = ".mp4",
     sources = _Sources(rec, settings, t0, t1)
     speed = float(rec.attrs.get("speed_factor", 1.0))
     head = f"{rec.scene} · ×{speed:g} · {rec.lux:g} lx"
-    canvas = _Canvas(len(sources.panels), sources.H, sources.W, head)
+    canvas = _Canvas(len(sources.panels), sources.H, sources.W, head, int(settings.panel_px))
     for t in times:
         title = f"{head} · t = {t * 1e3:.3f} ms" + ("" if kind == ".png" else f" · {settings.slowdown:g}× slower")
         img = canvas.draw(title, sources.labels(float(t)), sources.images(float(t)))
@@ -434,6 +438,8 @@ def write_preview(recording, out, settings: PreviewSettings = PreviewSettings(),
 SHORT_PREVIEW_S = 0.004
 SHORT_PREVIEW_SLOWDOWN = 250.0
 SHORT_PREVIEW_FPS = 10.0
+#: Its panels' size (px): small enough that a board embeds one GIF per strip (≈ 0.1 MB each on the mini).
+SHORT_PREVIEW_PANEL_PX = 160
 
 
 def write_short_preview(recording, out) -> PreviewResult:
@@ -441,7 +447,8 @@ def write_short_preview(recording, out) -> PreviewResult:
     one), :data:`SHORT_PREVIEW_SLOWDOWN` times slower at :data:`SHORT_PREVIEW_FPS` frames per second."""
     with open_recording(recording) as rec:
         duration = min(SHORT_PREVIEW_S, float(rec.duration_s))
-    settings = PreviewSettings(duration_s=duration, slowdown=SHORT_PREVIEW_SLOWDOWN, fps=SHORT_PREVIEW_FPS)
+    settings = PreviewSettings(duration_s=duration, slowdown=SHORT_PREVIEW_SLOWDOWN, fps=SHORT_PREVIEW_FPS,
+                               panel_px=SHORT_PREVIEW_PANEL_PX)
     return write_preview(recording, out, settings)
 
 

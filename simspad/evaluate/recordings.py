@@ -181,6 +181,16 @@ def recording_about(rec) -> dict:
         v = seq.get(name)
         if isinstance(v, (int, float, str)) and not isinstance(v, bool):
             out[name] = v
+    # the radiance's convergence: how it was rendered, and the render noise its budget measured (docs/format.md)
+    convergence = seq.get("convergence", "off" if "spp" in out else None)
+    if isinstance(convergence, str):
+        out["convergence"] = convergence
+    try:
+        noise = float(attrs["render_noise_relative"]) if "render_noise_relative" in attrs else None
+    except (TypeError, ValueError):
+        noise = None
+    if noise is not None and noise == noise:
+        out["render_noise_relative"] = noise
     return out
 
 

@@ -134,15 +134,17 @@ def _write_leaderboard(results_dirs: list[Path], out_dir: Path, preview=None) ->
             except SimSpadError:
                 continue  # a recording that cannot be previewed keeps its strip, without a preview
             written.add(gif)
-            previews[title] = gif
+            previews[title] = (gif, (out_dir / gif).read_bytes())
     with atomic_path(out_dir / "leaderboard.csv") as tmp:
         write_csv_table(tmp, board)
     real = real_recordings(results_dirs)  # recordings without ground truth: a section of their own
     with atomic_path(out_dir / "leaderboard.md") as tmp:
-        tmp.write_text(render_markdown(board, plot_files, strip_files, regime, regime_files, strip_note, previews)
+        tmp.write_text(render_markdown(board, plot_files, strip_files, regime, regime_files, strip_note,
+                                       {t: f for t, (f, _) in previews.items()})
                        + real_data_markdown(board, real, md_table, md_escape), encoding="utf-8")
     with atomic_path(out_dir / "leaderboard.html") as tmp:
-        page = render_html(board, plots, strips, regime, regime_pngs, strip_note, previews)
+        page = render_html(board, plots, strips, regime, regime_pngs, strip_note,
+                           {t: gif for t, (_, gif) in previews.items()})
         tmp.write_text(page.replace("</body></html>", real_data_html(board, real, _html_table) + "</body></html>"),
                        encoding="utf-8")
     written |= {"leaderboard.csv", "leaderboard.md", "leaderboard.html"}

@@ -62,7 +62,7 @@ def _img_tag(png: bytes, alt: str) -> str:
 
 def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, bytes]],
                 regime: Regime | None = None, regime_plots: dict[str, bytes] | None = None,
-                strip_note: str | None = None, previews: dict[str, str] | None = None) -> str:
+                strip_note: str | None = None, previews: dict[str, bytes] | None = None) -> str:
     lheader, lbody = lux_table(board)
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              "<title>SimSPAD leaderboard</title>", f"<style>{_CSS}</style></head><body>",
@@ -100,9 +100,11 @@ def render_html(board: Board, plots: dict[str, bytes], strips: list[tuple[str, b
             parts.append(f"<p class=\"note\">{html.escape(strip_note)}</p>")
         for title, png in strips:
             parts.append(f"<h3>{html.escape(title)}</h3>{_img_tag(png, title)}")
-            if previews and title in previews:
-                parts.append(f"<p><a href=\"{html.escape(previews[title])}\">preview of the recording (GIF: ground "
-                             "truth, SPAD, frames, events)</a></p>")
+            if previews and title in previews:  # embedded, as everything on the page: it stays one file
+                gif = base64.b64encode(previews[title]).decode("ascii")
+                parts.append("<details><summary>preview of the recording (ground truth, SPAD, frames, events: "
+                             f"the first ms, slowed down)</summary><img src=\"data:image/gif;base64,{gif}\" "
+                             f"alt=\"{html.escape(title)} preview\"></details>")
     parts += ["<h2>Glossary</h2>", _html_table(["Method", "Name", "Full name", "Sensors", "Source"],
                                                [[(c, False) for c in row] for row in glossary_rows(board)])]
     parts += [f"<p class=\"note\">{html.escape(n)}</p>" for n in notes(board)]

@@ -149,7 +149,7 @@ def recording_cells(board: Board):
     """Every recording of the board: scene, speed, lux, resolution, duration, seed and render settings (samples
     per pixel, keyframe spacing); – where no ``results.json`` says."""
     header = ["Recording", "Scene", "Speed", "Lux", "Resolution (px)", "Duration (ms)", "Seed", "Render spp",
-              "Keyframes ≤ px apart", "Keyframe rate ≥ (Hz)"]
+              "Convergence", "Render noise", "Keyframes ≤ px apart", "Keyframe rate ≥ (Hz)"]
     rows = {r["recording"]: r for r in board.rows}
     body = []
     for rec in board.recordings:
@@ -162,13 +162,19 @@ def recording_cells(board: Board):
                      (_text(i.get("lux", r.get("lux")), "{:g}"), False), (size, False),
                      (_text(1e3 * dur if isinstance(dur, (int, float)) else None, "{:g}"), False),
                      (_text(i.get("seed")), False), (_text(i.get("spp")), False),
+                     (_text({"off": "path traced"}.get(i.get("convergence"), i.get("convergence"))), False),
+                     (_text(100 * i["render_noise_relative"] if "render_noise_relative" in i else None, "{:.1f} %"),
+                      False),
                      (_text(i.get("max_flow_px"), "{:g}"), False), (_text(i.get("min_rate_hz"), "{:g}"), False)])
     return header, body
 
 
 ABOUT_NOTE = ("What this board ranks: the results directories merged (a later one overrides an earlier one's "
               "method on the same recording) and every recording scored, with what the results say of it. A "
-              "recording's render settings are its samples per pixel and the keyframe spacing (at most that many "
+              "recording's render settings are its samples per pixel, how its radiance was converged (path traced: "
+              "every keyframe path-traced at that many samples), its render noise (the median per-pixel relative "
+              "error of one keyframe against converged light, measured by rendering keyframe 0 twice with "
+              "independent seeds: the ground truth carries it too) and the keyframe spacing (at most that many "
               "pixels of image motion between rendered keyframes, at least that rate); the ground truth is "
               "interpolated between keyframes.")
 
