@@ -296,6 +296,13 @@ def main(argv: list[str] | None = None) -> int:
     if sigint.interrupted and code not in (130, 143):
         click.echo("simspad: interrupted", err=True)
         code = 130
+    if sigint.interrupted and argv is None:
+        # The program is ending on Ctrl-C: its clean-up has run (temporaries removed, pool workers killed) and the
+        # line is printed. The interpreter's own shutdown (joining pool threads, atexit) is skipped: under load a
+        # second press landing there ended the process by SIGINT (status −2) after the line, not 130.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     writer = sys.modules.get("simspad.io.recording.writer")
     if writer is not None and writer.hdf5_close_failed():
         # A close failed on a full disk: HDF5 would crash retrying it at exit (SIGSEGV); the temporary file is
