@@ -32,31 +32,11 @@ import numpy as np
 
 from simspad.radiance.timeline import Timeline
 from simspad.render.renderer import RenderSettings, render_sequence
-from simspad.sensors.events.model import draw_pixel_maps, sensor_current_1lux_e_s, sensor_photocurrent_e_s
-from simspad.sensors.events.simulator import EventSimulator, iter_knot_chunks
-from simspad.sensors.presets import EventParams
+# the noise-free event sensor (as `simspad simulate --sensors events --set events.shot_noise_rate_hz_at_1lux=0 --set
+# events.leak_rate_hz=0 --set events.hot_pixel_fraction=0`) and its event count, shared with the warp benchmark
+from bench_warp import event_counts
 
-#: The noise-free event sensor: only radiance changes make events (as `simspad simulate --sensors events --set
-#: events.shot_noise_rate_hz_at_1lux=0 --set events.leak_rate_hz=0 --set events.hot_pixel_fraction=0`).
-QUIET_EVENTS = replace(EventParams(), shot_noise_rate_hz_at_1lux=0.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0)
 LUX_LEVELS = (100.0, 1e4)
-
-
-def event_counts(tl: Timeline, lux: float) -> tuple[int, int]:
-    """(ON, OFF) events of the noise-free event sensor over the whole timeline at ``lux``."""
-    flux = tl.photon_flux(lux)
-    params = QUIET_EVENTS
-    maps = draw_pixel_maps(params, (tl.height, tl.width), np.random.default_rng(0))
-    current_1lux = sensor_current_1lux_e_s(float(np.mean(flux.keyframe(0))), lux, params)
-    sim = EventSimulator(params, (tl.height, tl.width), sensor_photocurrent_e_s(flux.sample(tl.t_start), params).ravel(),
-                         tl.t_start, current_1lux, maps)
-    on = off = 0
-    batches = (sim.advance(knot_t, knot_current) for knot_t, knot_current in
-               iter_knot_chunks(flux, tl.t_start, tl.t_end, params))
-    for batch in (*batches, sim.finish()):
-        on += int(np.count_nonzero(batch.polarity == 1))
-        off += int(np.count_nonzero(batch.polarity == 0))
-    return on, off
 
 
 def keyframe_luminance(tl: Timeline) -> np.ndarray:

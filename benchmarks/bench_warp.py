@@ -77,12 +77,12 @@ def rel_rmse(tl: Timeline, refs: dict) -> float:
     return float(math.sqrt(np.mean(err)) / np.mean([y.mean() for y in refs.values()]))
 
 
-def event_counts(tl: Timeline) -> tuple[int, int]:
-    """(ON, OFF) events of the quiet event camera over the whole timeline at LUX."""
-    flux = tl.photon_flux(LUX)
+def event_counts(tl: Timeline, lux: float = LUX) -> tuple[int, int]:
+    """(ON, OFF) events of the quiet (noise-free) event camera over the whole timeline at ``lux``."""
+    flux = tl.photon_flux(lux)
     params = QUIET_EVENTS
     maps = draw_pixel_maps(params, (tl.height, tl.width), np.random.default_rng(0))
-    current_1lux = sensor_current_1lux_e_s(float(np.mean(flux.keyframe(0))), LUX, params)
+    current_1lux = sensor_current_1lux_e_s(float(np.mean(flux.keyframe(0))), lux, params)
     sim = EventSimulator(params, (tl.height, tl.width), sensor_photocurrent_e_s(flux.sample(tl.t_start), params).ravel(),
                          tl.t_start, current_1lux, maps)
     on = off = 0

@@ -143,11 +143,7 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
     row = _base_row(task, white)
     out = {"row": row, "frame_rows": [], "mtf_rows": []}
     try:
-        method = get_method(task.method, **task.params)
-        row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
-        missing = [k for k in method.requires if not rec.has(k)]
-        if missing:
-            raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
+        method = _method_for(task, rec, row)
         times = rec.gt.t[idx]
         sink = None
         if task.save_reconstructions:
@@ -183,6 +179,17 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
     return out
 
 
+def _method_for(task: Task, rec, row: dict):
+    """The task's method, built with its parameters; its label, sensors and scale into ``row``. A recording
+    lacking a group the method reads is that run's failure (ValueError), not the end of the evaluation."""
+    method = get_method(task.method, **task.params)
+    row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
+    missing = [k for k in method.requires if not rec.has(k)]
+    if missing:
+        raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
+    return method
+
+
 def _run_task_without_gt(task: Task, rec) -> dict:
     """One method on a recording without ground truth (:mod:`simspad.evaluate.real_data`): reconstructions,
     bandwidth, an image and the declared star's MTF; PSNR and SSIM stay NaN."""
@@ -190,11 +197,7 @@ def _run_task_without_gt(task: Task, rec) -> dict:
     row = _base_row(task, float("nan"))
     out = {"row": row, "frame_rows": [], "mtf_rows": []}
     try:
-        method = get_method(task.method, **task.params)
-        row.update(label=method.label, sensors=method.sensors, absolute_scale=bool(method.absolute_scale))
-        missing = [k for k in method.requires if not rec.has(k)]
-        if missing:
-            raise ValueError(f"recording lacks the sensor group(s) {', '.join(missing)}")
+        method = _method_for(task, rec, row)
         times = evaluation_times(rec, task.rate_hz)
         sink = None
         if task.save_reconstructions:

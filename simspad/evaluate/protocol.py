@@ -105,6 +105,34 @@ def _checked_frame(img, i: int, n: int, shape: tuple[int, int]) -> np.ndarray:
     return img
 
 
+class CheckedFrames:
+    """A method's frames as ``(i, frame)``, each checked as it arrives (:func:`_checked_frame`), the count checked
+    at the end; ``method_s`` sums the time spent inside the method's iterator only (not the caller's scoring),
+    ``n`` is the number of frames once iterated."""
+
+    def __init__(self, frames, n: int, shape: tuple[int, int]):
+        self._frames, self._n, self._shape = frames, n, shape
+        self.method_s = 0.0
+        self.n = 0
+
+    def __iter__(self):
+        it = iter(self._frames)
+        i = 0
+        while True:
+            t0 = time.perf_counter()
+            try:
+                img = next(it)
+            except StopIteration:
+                self.method_s += time.perf_counter() - t0
+                break
+            self.method_s += time.perf_counter() - t0
+            yield i, _checked_frame(img, i, self._n, self._shape)
+            i += 1
+        if i != self._n:
+            raise ValueError(f"{i} frames for {self._n} evaluation instants")
+        self.n = i
+
+
 class GroundTruthCache:
     """What scoring derives from a recording's ground truth, computed once for all the methods scored on it.
 
@@ -211,18 +239,8 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None,
         gt_cache = GroundTruthCache(white, max_bytes=0)  # nothing kept: each frame computed once, here
     mtf = _MeanMtf()
     images = None
-    method_s = 0.0
-    it = iter(frames)
-    i = 0
-    while True:
-        t0 = time.perf_counter()
-        try:
-            img = next(it)
-        except StopIteration:
-            method_s += time.perf_counter() - t0
-            break
-        method_s += time.perf_counter() - t0
-        img = _checked_frame(img, i, idx.size, (H, W))
+    checked = CheckedFrames(frames, idx.size, (H, W))
+    for i, img in checked:
         if frame_sink is not None:
             frame_sink(i, img)
         gt, gt_display = gt_cache.frame(rec, int(idx[i]))
@@ -238,9 +256,7 @@ def score_frames(rec, idx: np.ndarray, frames, run: ScoringRun, frame_sink=None,
             mtf.add(*metrics.mtf_siemens(shown, gt, geometry=geometry, gt_harmonics=h_gt))
         if i == image_frame:
             images = (crop(metrics.display_map(shown, white)), crop(gt_display))
-        i += 1
-    if i != idx.size:
-        raise ValueError(f"{i} frames for {idx.size} evaluation instants")
+    i, method_s = checked.n, checked.method_s
     return {"frame_rows": frame_rows, "psnr_db": float(np.mean(psnrs)) if psnrs else float("nan"),
             "ssim": float(np.nanmean(ssims)) if ssims and not np.all(np.isnan(ssims)) else float("nan"),
             "n_frames": i, "mtf": mtf.result(), "images": images, "method_s": method_s}

@@ -27,11 +27,11 @@ from __future__ import annotations
 
 import json
 import math
-import time
 
 import numpy as np
 
 from simspad.evaluate import metrics
+from simspad.evaluate.protocol import CheckedFrames
 
 #: The note results.json carries for recordings without ground truth.
 NO_GT_NOTE = ("psnr_db and ssim are NaN for recordings without ground truth (/gt): not available, not zero; the "
@@ -123,23 +123,9 @@ def score_without_gt(rec, times: np.ndarray, frames, star: dict | None, frame_si
     """
     H, W = rec.height, rec.width
     mtf = StarMtf(star) if star is not None else None
-    image, method_s, i = None, 0.0, 0
-    it = iter(frames)
-    while True:
-        t0 = time.perf_counter()
-        try:
-            img = next(it)
-        except StopIteration:
-            method_s += time.perf_counter() - t0
-            break
-        method_s += time.perf_counter() - t0
-        if i >= times.size:
-            raise ValueError(f"more frames than the {times.size} evaluation instants")
-        img = np.asarray(img)
-        if img.shape != (H, W):
-            raise ValueError(f"frame {i} has shape {img.shape}, expected {(H, W)}")
-        if not np.all(np.isfinite(img)):
-            raise ValueError(f"frame {i} holds NaN or inf values")
+    image = None
+    checked = CheckedFrames(frames, times.size, (H, W))
+    for i, img in checked:
         if frame_sink is not None:
             frame_sink(i, img)
         if mtf is not None:
@@ -147,7 +133,5 @@ def score_without_gt(rec, times: np.ndarray, frames, star: dict | None, frame_si
         if i == times.size // 2:
             white = float(np.percentile(img, metrics.WHITE_PERCENTILE))
             image = metrics.display_map(img, white if white > 0 else 1.0)
-        i += 1
-    if i != times.size:
-        raise ValueError(f"{i} frames for {times.size} evaluation instants")
+    i, method_s = checked.n, checked.method_s
     return {"n_frames": i, "method_s": method_s, "mtf": mtf.result() if mtf is not None else None, "image": image}
