@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from simspad.io.trajectory_files import load_trajectory
-from simspad.motion.summary import motion_summary
+from simspad.motion.trajectory_summary import motion_summary
 
 
 def describe_trajectory(path) -> str:

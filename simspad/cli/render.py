@@ -8,7 +8,7 @@ from pathlib import Path
 from simspad.io.bundled import find_trajectory
 from simspad.io.output_dirs import owned_dir_in_place, write_marker
 from simspad.render.renderer import RenderSettings, render_sequence
-from simspad.render.summary import RenderSummary
+from simspad.render.render_summary import RenderSummary
 from simspad.sensors.presets import SpadParams
 
 

@@ -39,7 +39,7 @@ class RenderTask:
     render_hash: str
     rel_dir: str
     seed: int
-    speed_factor: float = 1.0  # trajectory played this many times faster (simspad.motion.retiming)
+    speed_factor: float = 1.0  # trajectory played this many times faster (simspad.dataset.speed)
     #: The same sequence's render at the next slower speed, whose keyframes are this render's first ones (the
     #: same poses, seed and settings: :func:`shares_keyframes`), or None.
     prefix: "RenderTask | None" = None
@@ -65,7 +65,7 @@ class RecordingTask:
     gt_rate_hz: float
     optics: Any  # simspad.physics.radiometry.Optics
     metadata: tuple  # ((key, value), ...): root attrs of the recording
-    speed_factor: float = 1.0  # trajectory played this many times faster (simspad.motion.retiming)
+    speed_factor: float = 1.0  # trajectory played this many times faster (simspad.dataset.speed)
 
 
 @dataclass(frozen=True)

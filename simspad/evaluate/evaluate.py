@@ -466,8 +466,3 @@ def _method_params(spec_params, cli_params, *, manifest_path) -> dict[str, dict]
     for m, p in (cli_params or {}).items():
         out[m] = check_method_params(m, {**out.get(m, {}), **p}, field="--param")
     return {m: p for m, p in out.items() if p}
-
-
-def evaluate_recording(rec_path, methods=None, out_dir=None, rate_hz=None) -> list[dict]:
-    """Evaluate ``methods`` on one recording into the results directory ``out_dir``; return the rows."""
-    return evaluate(Path(rec_path), methods=methods, out_dir=out_dir, rate_hz=rate_hz)[1]

@@ -38,10 +38,6 @@ NO_GT_NOTE = ("psnr_db and ssim are NaN for recordings without ground truth (/gt
               "Siemens-star MTF of such recordings is relative to a perfect print of the declared contrast")
 
 
-def has_ground_truth(rec) -> bool:
-    return rec.has("gt")
-
-
 def evaluation_times(rec, rate_hz: float) -> np.ndarray:
     """The instants ``t_start_s + k/rate_hz`` inside ``[t_start_s, t_end_s)``, s."""
     t0 = float(rec.attrs.get("t_start_s", 0.0))

@@ -39,8 +39,6 @@ from simspad.render.mitsuba_scene import psf_blur
 
 #: Cell sizes tried by a lookup, in multiples of the finest cell, finest first.
 LEVELS = (1, 4, 16)
-#: Normal bins: the dominant axis and its sign (6 bins).
-N_NORMAL_BINS = 6
 #: Chain vertices followed per camera sample (the first hit plus glossy/specular bounces).
 CHAIN_VERTICES = 3
 #: Path length used where the scene's integrator has none (max_depth = -1: Russian roulette only).

@@ -88,7 +88,7 @@ from simspad.render.mitsuba_scene import (
 from simspad.render.render_plan import RenderPlan
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
-from simspad.render.summary import RenderSummary
+from simspad.render.render_summary import RenderSummary
 from simspad.render.warp_render import (
     chunk_result,
     merge_chunk_results,
@@ -172,7 +172,7 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
 
     ``prefix`` (a linearly interpolated plan with the same scene, size, samples and seed) makes this render's first
     keyframes those of ``prefix``, at its instants times ``prefix_time_scale``, with its poses and file names: the
-    same sequence played faster (:mod:`simspad.motion.retiming`) passes through the same poses, so the files of
+    same sequence played faster (:mod:`simspad.dataset.speed`) passes through the same poses, so the files of
     the slower render serve this one too and need not be rendered again (:func:`link_shared_keyframes`). The
     schedule goes on from the prefix's last instant to the end of the span.
     """

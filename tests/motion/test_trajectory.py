@@ -13,7 +13,7 @@ from simspad.errors import InputError
 from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory, save_trajectory
 from simspad.motion.generators import Tremor, handheld_shake, linear_pan, object_rotation, orbit, static_pose
-from simspad.motion.summary import motion_summary
+from simspad.motion.trajectory_summary import motion_summary
 from simspad.motion.trajectory import Trajectory, TrajectorySet, look_at
 
 

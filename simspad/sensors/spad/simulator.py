@@ -77,7 +77,6 @@ class SpadChunker:
         self._events = np.empty((EVENTS_CAPACITY, 3), np.int64)
         # a call touches at most MAX_KEYFRAMES_PER_CALL + 1 keyframes (the one before its first bin included)
         self._ring = KeyframeRing(flux_tl, MAX_KEYFRAMES_PER_CALL + 1)
-        self.n_detections_secondary = 0
 
     def chunk(self, k0: int, m: int, out: np.ndarray | None = None) -> np.ndarray:
         """Packed bits of bins ``k0 … k0+m−1`` as ``[m, H, ceil(W/8)]`` uint8. Call with consecutive ``k0``.
@@ -108,7 +107,6 @@ class SpadChunker:
         if len(carry):
             apply_events(out, carry, 0)
         rest = apply_events(out, events, m)
-        self.n_detections_secondary += len(events)
         # afterpulses of the very last bin fall outside the recording
         self._carry = rest if k0 + m < self.n_total else np.empty((0, 3), np.int64)
         return out

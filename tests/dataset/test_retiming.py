@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from simspad.dataset.speed import base_span_s, retimed
 from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
-from simspad.motion.retiming import base_span_s, retimed
 
 
 @pytest.mark.parametrize("k", [8.0, 3.0, 0.5])
