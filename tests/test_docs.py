@@ -4,6 +4,7 @@
 - Nothing (code, docs, specs, tests, examples, benchmarks) refers to a design document outside the repository.
 - docs/format.md documents every sensor parameter a spec can set and every group and root attribute that a
   recording's layout requires.
+- docs/internals.md's tree names every module of the package, in its own folder, and no module that is gone.
 """
 
 from __future__ import annotations
@@ -69,3 +70,35 @@ def test_format_documents_the_recording_layout():
             required.update(items)
     missing = sorted(r for r in required if r not in names)
     assert not missing, f"docs/format.md does not document {missing}"
+
+
+def _internals_tree_modules() -> set[str]:
+    """The modules docs/internals.md's tree names, as paths: a line ``  name/`` (two spaces a level) opens a
+    folder, and every ``*.py`` on it or on the lines under it belongs to that folder."""
+    text = (REPO / "docs" / "internals.md").read_text(encoding="utf-8")
+    tree = text.split("## The tree", 1)[1].split("```", 2)[1]
+    named, folders = set(), []
+    for line in tree.splitlines():
+        indent = len(line) - len(line.lstrip())
+        if not line.strip() or indent % 2 or indent >= 20:  # continuation lines are indented further
+            rest = line
+        else:
+            folders = folders[: indent // 2]
+            m = re.match(r"(\S+)/(\s|$)", line.lstrip())
+            rest = line.lstrip()[len(m.group(1)) + 1:] if m else line
+            if m:
+                folders.append(m.group(1))
+        # a name with a folder in front (``io/manifest.py``) points elsewhere in the tree
+        named.update("/".join(folders + [f]) for f in re.findall(r"(?<![/\w])(\w+\.py)\b", rest))
+    return named
+
+
+def test_internals_tree_names_every_module():
+    package = REPO / "simspad"
+    modules = {str(p.relative_to(REPO)) for p in package.rglob("*.py")
+               if p.name != "__init__.py" and p.relative_to(package).parts[0] != "data"}
+    named = _internals_tree_modules()
+    missing = sorted(modules - named)
+    assert not missing, f"docs/internals.md's tree does not name {missing}"
+    gone = sorted(n for n in named - modules if not n.endswith("/__init__.py"))
+    assert not gone, f"docs/internals.md's tree names modules that do not exist: {gone}"
