@@ -17,21 +17,15 @@ switch either rule off. A tile is also read at least every ``max_interval`` cand
 refresh at the 0.4 kHz grid), because errors that produce no events (a missed or mis-sized change) cannot raise P
 and only a readout reveals them. Unrequested tiles get no measurement (R⁻¹ = 0): their state integrates events
 only, and P keeps growing with the event noise Q (threshold mismatch, photoreceptor bandwidth, isolation) and σ_p
-until they ask again; only requested aggregates are charged to the bandwidth.
-
-Measured on the mini dataset (64×48, 30–50 ms; SPAD readouts saved and PSNR loss against NEDI+AKF at the full
-0.4 kHz), at 1000 lx: fan 5.8× for 4.0 dB, Siemens star 4.7× for 3.9 dB, piano 3.0× for 3.6 dB, plant 1.1× for
-1.7 dB, office 1.0× for 0.3 dB (its HDR window forces a short gate: every aggregate is noisy); at 10 lx 1.0–3.3×
-for 0.2–4.2 dB. Without the refresh the savings were larger (up to 9.8×) and the losses too (up to 5 dB); the
-ratio rule alone lost 4.7–5.7 dB at 1–10 lx on the star, the absolute rule alone 5.8 dB on a 300 ms sequence.
-The paper reports ≈ 4× for ≈ 4 dB.
+until they ask again; only requested aggregates are charged to the bandwidth. What the two rules and the refresh
+save and cost on the mini dataset: docs/methods.md ("SimSPAD's measurements behind the methods' choices").
 
 Adaptive integration time (the paper: "adaptively changing the integration time of SPADs"): a tile that is not
 read keeps counting, so when it is read its aggregate holds every bin since its previous readout (at most
 ``max_windows`` windows; then the in-pixel counter restarts). That aggregate is deblurred by NEDI over its whole
 span with the events, ``ceil(log2(n + 1))`` bits are charged for its n bins, and the readout decision uses the
-variance of that longer aggregate (``integrate=True``). Default off: on the Siemens star it did not improve the
-quality-versus-readouts trade-off (events from slow, dim photoreceptors do not deblur long spans well).
+variance of that longer aggregate (``integrate=True``). Default off (docs/methods.md: events from slow, dim
+photoreceptors do not deblur long spans well).
 """
 
 from __future__ import annotations

@@ -31,12 +31,11 @@ weights computed from a measurement's own value favour high photon-count draws a
 
 Dim pixels: an aggregate with fewer than ``LOW_COUNT`` (10) ones is fed as the equivalent Gaussian measurement of
 its exact Bernoulli likelihood around the filter's prediction (:func:`simspad.methods.nedi.laplace_update`), not
-as a floored ln Φ̂: on the office scene at 1 lx, dark regions came out ≈ 3× too bright without it.
+as a floored ln Φ̂, which biases dark regions bright (docs/methods.md).
 
 Covariance matching (:func:`inflate_by_innovation`): at each new frame, P is scaled up where the 3×3-pooled
 innovations exceed P + R. Events that never fired (a photoreceptor too slow for the motion in dim light) add no Q,
-so without this the filter keeps trusting a stale state and compresses contrast: on the rotating Siemens star at
-10 lx, NEDI+AKF scored 18.5 dB without it and 25.0 dB with it (NEDI alone 25.0 dB).
+so without this the filter keeps trusting a stale state and compresses contrast (docs/methods.md).
 
 Defaults (Wang et al.'s published code): σ_p = 0.005 s⁻¹, σ_iso = 0.03 s⁻¹, σ_ref = 0.05 s⁻¹, refractory
 window 10 ms. The initial state is the first measurement with P = its ``var_log``.

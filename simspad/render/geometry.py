@@ -6,8 +6,7 @@ knows no sensor). :func:`plan_geometry` lists the instants (:func:`simspad.io.ge
 rendered span), their poses and cache-keyed file names; each instant belongs to the keyframe at or before it
 (:func:`geometry_owners`), so whichever process renders a run of keyframes renders their instants too, and a
 re-run re-uses every pass already on disk. A pass is one unjittered sample per pixel through the depth + shape
-AOV integrator: 0.4 % of a 512² 64-spp office render's samples; on the mini's 80 × 60 px renders its fixed cost
-makes it 8–23 ms of CPU (11–45 % of an 8-spp keyframe), 3.4 % of the mini's keyframe CPU in all.
+AOV integrator (its cost: docs/performance.md, "Where a dataset's time goes").
 """
 
 from __future__ import annotations

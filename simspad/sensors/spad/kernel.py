@@ -1,7 +1,7 @@
 """SPAD sampling kernel (numba): the primary bits of a chunk of bins and their secondary detections.
 
-Efficiency
-----------
+Samplers
+--------
 Drawing one uniform number per pixel per bin costs the same whatever the light level. Here the bins of a chunk
 are simulated per output byte (8 pixels) by whichever of two exact samplers is expected to be cheaper, from the
 byte's rate bounds (the flux is piecewise linear, so its bounds sit on keyframes): the sparse one while its
@@ -24,31 +24,7 @@ for the dense loop, :data:`DENSE_MIN_BYTES`), else the dense one.
   by counter), and the start of each linear piece sets z for the whole row with an inlined exponential
   (:mod:`simspad.physics.vector_exp`). A run of a single bin (a gate straddling a keyframe) computes no per-bin
   factor. That set-up works in the sampler's own [bit, byte] layout, on the dense bytes only: each row's dark term
-  and keyframe values are transposed into it once, instead of Λ being computed for the whole row in pixel order
-  and scattered into the layout at every run (the same operations per pixel, so the same bits; kernel alone, min
-  of 7 calls of 512 bins, median of 5 alternating processes: 84.4 → 77.5 ms at mean P(1) = 0.05, 151 → 146 at
-  0.9). A bit-sliced alternative (one 64-bit draw gives the next bit of 64 pixels' uniforms, and the leading
-  bits that every z of a block shares decide most pixels at once, the rest by their own slice) was measured
-  against this sampler on the scene of benchmarks/bench_spad.py: equal per 64 pixels at mean P(1) = 0.05
-  (≈ 60 ns; the undecided pixels cost a data-dependent branch each), 2.5× slower at 0.3 (no faster with a
-  per-block fall-back to slices), while the bytes where it would win (P(1) ≲ 0.03) go to the sparse sampler.
-
-Where the time goes, per call of 512 bins of the scene of benchmarks/bench_spad.py (the kernel with parts removed,
-in one process; an AMD EPYC with AVX-512): every byte dense, ≈ 75 ms at any mean P(1), of which ≈ 38 drawing and
-comparing (:func:`~simspad.sensors.spad.dense_bits.dense_bits`), ≈ 13 advancing z by its per-bin factor and ≈ 24 the
-rest (each run's set-up, the row bounds, storing the block); with the sampler chosen per byte, ≈ 80 ms at 0.05 and
-≈ 7.5 at 0.001: the per-row set-up ≈ 1.4, each byte's set-up ≈ 0.75, zeroing the block ≈ 1, storing it ≈ 1.4 and the
-candidates ≈ 2.9 (≈ 1.2 per detection, ≈ 17 ns each). Measured earlier on another machine, at 0.001: ≈ 2.5 fixed,
-≈ 4 storing the block (16 MB to memory), ≈ 4 drawing and ≈ 4 thinning. Tried against this kernel with the same bytes
-and no gain beyond the ± 5–10 % between alternating calls: thinning without branches (the exact Λ_k for every
-candidate: 1.14–1.2× slower), per-run bounds of Λ for the squeeze, candidates drawn in batches (in a function of
-their own) before thinning, a padded block (no cache-set aliasing between bins), and the dense set-up of each run
-computed for the dense bytes only instead of the whole row; and, for the dense sampler, advancing z inside
-:func:`~simspad.sensors.spad.dense_bits.dense_bits` (into a second buffer, so that ties still see the old z): its
-loop then no longer vectorises, 5–8× slower; and 8-bit slices (one 64-bit draw per byte instead of two, a tie at
-probability 1/256 resolved from a per-byte tie mask): 85–88 ms against 73 per call at mean P(1) = 0.05, and no
-faster (74–78) even with the ties left unresolved. The draws do not bound the dense loop; its per-lane conversions
-and compares do.
+  and keyframe values are transposed into it once.
 
 Both samplers write a block of rows of every bin into a small L2-resident buffer that is then stored bin by bin
 (in place, a byte's bins lie H·ceil(W/8) bytes apart and alias to the same cache sets).
@@ -57,11 +33,8 @@ The random stream is a SplitMix64 generator (:mod:`simspad.physics.rng`) inside 
 kernel call from the caller's ``numpy.random.Generator``: one sequential stream, so outputs are bit-identical for
 the same seed and chunking (the chunk size is a function of the frame size only).
 
-The "mean P(1)" of the measurements quoted in this module is benchmarks/bench_spad.py's level before it counted
-the modulation and the dark counts: the fraction of ones those runs held was ≈ 0.0019 at "0.001", ≈ 0.063 at
-"0.05" and ≈ 0.93 at "0.9".
-
-The model (Λ_k, secondary effects) is described in :mod:`simspad.sensors.spad.model`.
+Where the kernel's time goes, and the alternatives measured against it: docs/performance.md (section "The SPAD
+sampling kernel"). The model (Λ_k, secondary effects) is described in :mod:`simspad.sensors.spad.model`.
 """
 
 from __future__ import annotations
