@@ -249,6 +249,8 @@ def sheet_music(shape: tuple[int, int] = (560, 400), seed: int = 23) -> np.ndarr
                 sx = x + gap * 0.6 if stem_up else x - gap * 0.6
                 draw.line([(sx, y), (sx, y - 3.3 * gap if stem_up else y + 3.3 * gap)], fill=15,
                           width=max(1, int(gap / 5)))
+                for ledger in range(-2, p - 9, -2) if p >= 10 else []:
+                    pass
                 if p <= -2:
                     draw.line([(x - gap, top + 5 * gap), (x + gap, top + 5 * gap)], fill=20, width=1)
             if n_notes >= 6:
