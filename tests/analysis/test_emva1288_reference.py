@@ -46,11 +46,20 @@ OFFLINE_MARKERS = ("NewConnectionError", "Failed to establish a new connection",
 def _emva_python() -> Path:
     """The Python of a virtual environment holding ``emva1288`` (made on first use; skip when offline)."""
     venv = Path(os.environ.get("SIMSPAD_EMVA_VENV") or Path.home() / ".cache" / "simspad-emva")
-    python, done = venv / "bin" / "python", venv / ".simspad-emva-installed"
+    python, done, making = venv / "bin" / "python", venv / ".simspad-emva-installed", venv / ".simspad-emva-making"
     if done.exists() and python.exists():
         return python
-    if venv.exists():  # a half-made environment of an interrupted run: ours, made again
+    if venv.exists() and not making.exists():  # not made by this test: used if it holds emva1288, never deleted
+        usable = python.exists() and subprocess.run([str(python), "-c", "import emva1288"],
+                                                    capture_output=True).returncode == 0
+        if usable:
+            return python
+        raise AssertionError(f"{venv} exists but is not an environment with emva1288; remove it or set "
+                             f"SIMSPAD_EMVA_VENV to another folder")
+    if venv.exists():  # half made by an interrupted run of this test: made again
         shutil.rmtree(venv)
+    venv.mkdir(parents=True)
+    making.write_text("being made by tests/analysis/test_emva1288_reference.py\n")
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, capture_output=True, timeout=300)
     # emva1288 1.0.2 calls np.asfarray, which NumPy 2 removed, and does not pin NumPy itself
     r = subprocess.run([str(python), "-m", "pip", "install", "--disable-pip-version-check", "emva1288",
@@ -63,6 +72,7 @@ def _emva_python() -> Path:
                         f"{log.strip().splitlines()[-1]}")
         raise AssertionError(f"pip install emva1288 failed:\n{log[-3000:]}")
     done.write_text("emva1288 installed\n")
+    making.unlink()
     return python
 
 
