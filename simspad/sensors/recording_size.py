@@ -3,8 +3,9 @@ must be refused with the figure, not discovered after gigabytes are written.
 
 The estimate counts what is known from the interval and the parameters alone, by each sensor-table row's size
 model (``rows``, ``row_bytes``): SPAD bit planes (one bit per pixel per bin), frames (uint16 per pixel), and the
-ground truth (float32 flux and depth per instant); events depend on the scene and are not counted, nor is the ground truth's geometry (instances, flow, validity, velocity: stored
-compressed, measured by ``simspad generate --estimate``). Compressed layouts only make the file smaller.
+ground truth (float32 flux and depth per instant); events depend on the scene and are not counted, nor is the
+ground truth's geometry (instances, flow, validity, velocity: stored compressed, measured by
+``simspad generate --estimate``). Compressed layouts only make the file smaller.
 """
 
 from __future__ import annotations

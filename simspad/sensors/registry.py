@@ -21,13 +21,19 @@ from dataclasses import dataclass, is_dataclass
 
 from simspad import defaults
 from simspad.errors import SimSpadError
-from simspad.io.recording.layout import EVENTS_LAYOUT, FRAMES_LAYOUT, SENSOR_LAYOUTS, SPAD_LAYOUT, SensorLayout, \
-    register_layout
+from simspad.io.recording.layout import (
+    EVENTS_LAYOUT,
+    FRAMES_LAYOUT,
+    SENSOR_LAYOUTS,
+    SPAD_LAYOUT,
+    SensorLayout,
+    register_layout,
+)
 from simspad.sensors import events, frames, spad
 from simspad.sensors.events import describe as events_describe
 from simspad.sensors.events import model as events_model
 from simspad.sensors.frames import describe as frames_describe
-from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, register_presets
+from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, EventParams, FrameParams, SpadParams, register_presets
 from simspad.sensors.spad import describe as spad_describe
 
 #: One problem of a dataset spec: (field path, message).
@@ -125,7 +131,7 @@ def _events_spec_problems(params, where, width, height, duration_s, lux_levels) 
 
 
 SPAD = Sensor(
-    name="spad", params=type(PRESETS["spad"]["swissspad2"]), presets=PRESETS["spad"],
+    name="spad", params=SpadParams, presets=PRESETS["spad"],
     default_preset=DEFAULT_PRESET["spad"], layout=SPAD_LAYOUT,
     validate=lambda params, height: spad.validate_params(params),
     simulate=_simulate_spad,
@@ -135,7 +141,7 @@ SPAD = Sensor(
     spec_problems=_spad_spec_problems,
 )
 FRAMES = Sensor(
-    name="frames", params=type(PRESETS["frames"]["blackfly_s"]), presets=PRESETS["frames"],
+    name="frames", params=FrameParams, presets=PRESETS["frames"],
     default_preset=DEFAULT_PRESET["frames"], layout=FRAMES_LAYOUT,
     validate=frames.validate_params,
     simulate=_simulate_frames,
@@ -144,7 +150,7 @@ FRAMES = Sensor(
     row_bytes=lambda width, height: 2 * width * height,
 )
 EVENTS = Sensor(
-    name="events", params=type(PRESETS["events"]["prophesee_gen4"]), presets=PRESETS["events"],
+    name="events", params=EventParams, presets=PRESETS["events"],
     default_preset=DEFAULT_PRESET["events"], layout=EVENTS_LAYOUT,
     validate=lambda params, height: events.validate_params(params),
     simulate=_simulate_events,
