@@ -1,7 +1,9 @@
 """``simspad info`` for recordings and datasets: what is inside, how big, how fast the data streams.
 
-Bandwidths follow docs/methods.md: a SPAD pixel reads out 1 bit per binary frame (1/bin_s), a conventional frame
-``bit_depth`` bits per pixel per frame, an event 32 bits. Event rates are per pixel of the simulation grid.
+Each sensor group of a recording is described by its row of the sensor table (:mod:`simspad.sensors.registry`):
+its ``describe`` gives a headline and detail lines (bandwidths as in docs/methods.md: a SPAD pixel reads out 1 bit
+per binary frame, a conventional frame ``bit_depth`` bits per pixel per frame, an event 32 bits), its
+``describe_attrs`` the parameters shown; this module adds the group's size on disk.
 """
 
 from __future__ import annotations
@@ -10,14 +12,10 @@ import math
 
 from pathlib import Path
 
-import numpy as np
-
 from simspad.cli.text import format_bytes, format_duration_s, recording_table
 from simspad.io.manifest import read_manifest, recording_mismatch
 from simspad.io.recording import open_recording
-
-_SPAD_SAMPLE_BINS = 1024
-"""Binary frames read to estimate the mean detection probability (cheap: the file is not read whole)."""
+from simspad.sensors.registry import SENSORS
 
 
 def _group_bytes(h5, group: str) -> int:
@@ -59,7 +57,6 @@ def describe_recording(path) -> str:
     with open_recording(path) as rec:
         a = rec.attrs
         W, H, dur = rec.width, rec.height, rec.duration_s
-        n_px = W * H
         lines = [f"recording {path}",
                  f"  size        {format_bytes(path.stat().st_size)}",
                  f"  sequence    {rec.sequence} (scene {rec.scene}, trajectory {a.get('trajectory', '-')})",
@@ -87,15 +84,23 @@ def describe_recording(path) -> str:
                              f"(x fov {float(cam.get('x_fov_deg', float('nan'))):.4g}°)"
                              + (f", moving: {', '.join(moving)}" if moving else ""))
         lines.append("  sensors")
-        if rec.has("spad"):
-            lines += _spad_lines(rec, n_px, dur)
-        if rec.has("frames"):
-            lines += _frame_lines(rec, dur)
-        if rec.has("events"):
-            lines += _event_lines(rec, n_px, dur)
+        for kind in rec.sensors:
+            lines += _sensor_lines(rec, kind)
         if not rec.sensors:
             lines.append("    (none)")
     return "\n".join(lines)
+
+
+def _sensor_lines(rec, kind: str) -> list[str]:
+    """The lines of sensor group ``kind``: its row's headline with the group's size on disk, its parameters, its
+    detail lines (a kind without a row in this process: its size and attributes alone)."""
+    row = SENSORS.get(kind)
+    attrs = rec.view(kind).attrs
+    headline, details = row.describe(rec) if row else ("(no sensor-table row in this installation)", [])
+    keys = row.describe_attrs if row else tuple(attrs)
+    return [f"    {kind:<9} {headline}, {format_bytes(_group_bytes(rec.h5, kind))}",
+            f"              {_attr_line(attrs, keys)}",
+            *(f"              {line}" for line in details)]
 
 
 def _render_noise_text(a) -> str:
@@ -116,56 +121,6 @@ def _motion_text(a) -> str:
         text += (f"; blur p95 {float(a['frame_blur_px_p95']):.4g} px in one "
                  f"{format_duration_s(float(a.get('frame_blur_exposure_s', float('nan'))))} frame")
     return text
-
-
-def _spad_lines(rec, n_px: int, dur: float) -> list[str]:
-    sa = rec.spad.attrs
-    n_bins = rec.spad.n_bins
-    bin_s = float(sa["bin_s"])
-    sample = min(n_bins, _SPAD_SAMPLE_BINS)
-    p1 = float(rec.spad.counts(0, sample).sum()) / (sample * n_px) if sample else float("nan")
-    dcr = rec.spad.dcr_cps
-    return [f"    spad      {n_bins} binary frames ({1 / bin_s / 1e3:.4g} kHz), {format_bytes(_group_bytes(rec.h5, 'spad'))}",
-            f"              {_attr_line(sa, ('preset', 'bin_s', 'gate_s', 'pixel_pitch_m', 'fill_factor', 'qe', 'dead_time_s'))}",
-            f"              mean P(1) {p1:.4f} (first {sample} frames), DCR median {np.median(dcr):.3g} cps",
-            f"              bandwidth {1 / bin_s / 1e3:.4g} kHz/pixel = {1 / bin_s:.4g} bit/pixel/s "
-            f"({n_px / bin_s / 8 / 2**20:.4g} MiB/s for the grid)"]
-
-
-def _frame_lines(rec, dur: float) -> list[str]:
-    fa = rec.frames.attrs
-    k = rec.frames.n_frames
-    t0 = rec.frames.t_start
-    rate = float(fa.get("frame_rate_hz", (k - 1) / (t0[-1] - t0[0]) if k > 1 and t0[-1] > t0[0] else 0.0))
-    bits = int(fa.get("bit_depth", 16))
-    mean_dn = float(rec.frames.dn(0).mean()) if k else float("nan")
-    return [f"    frames    {k} frames at {rate:.4g} fps, {format_bytes(_group_bytes(rec.h5, 'frames'))}",
-            f"              {_attr_line(fa, ('preset', 'exposure_s', 'gain_dn_per_e', 'read_noise_e', 'full_well_e', 'bit_depth', 'qe', 'pixel_pitch_m'))}",
-            f"              first frame mean {mean_dn:.1f} DN",
-            f"              bandwidth {rate / 1e3:.4g} kHz/pixel = {rate * bits:.4g} bit/pixel/s"]
-
-
-def _event_lines(rec, n_px: int, dur: float) -> list[str]:
-    ea = rec.events.attrs
-    n = rec.events.n_events
-    rate_px = n / (n_px * dur) if dur > 0 else float("nan")
-    labels = ""
-    if n and "events/label" in rec.h5:
-        counts = np.zeros(4, np.int64)
-        step = 1 << 22
-        ds = rec.h5["events/label"]
-        for i in range(0, n, step):
-            counts += np.bincount(np.minimum(ds[i : i + step], 3), minlength=4)[:4]
-        labels = ", ".join(f"{name} {c / n:.1%}" for name, c in zip(("signal", "shot", "leak", "hot"), counts))
-    on = ""
-    if n:
-        p = rec.h5["events/p"][: min(n, 1 << 22)]
-        on = f", ON {p.mean():.1%}"
-    return [f"    events    {n} events ({n / dur if dur > 0 else float('nan'):.4g} ev/s, {rate_px:.4g} ev/pixel/s{on}), "
-            f"{format_bytes(_group_bytes(rec.h5, 'events'))}",
-            f"              {_attr_line(ea, ('preset', 'threshold_on', 'threshold_off', 'threshold_sigma', 'refractory_s', 'pixel_pitch_m'))}",
-            *( [f"              labels: {labels}"] if labels else []),
-            f"              bandwidth {rate_px / 1e3:.4g} kHz/pixel = {rate_px * 32:.4g} bit/pixel/s (32 bit/event)"]
 
 
 #: ``simspad info DATASET`` hashes the complete recordings up to this many bytes in all (about 10 s per 10 GB).

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from simspad.cli.text import format_duration_s
@@ -57,6 +58,8 @@ def _overrides_text(overrides: dict) -> str:
 
 def _key_params(p) -> str:
     kind = getattr(p, "kind", "")
+    if not all(hasattr(p, k) for k in ("pixel_pitch_m", "fill_factor", "qe")):  # a sensor without pixels
+        return ", ".join(f"{f.name} {getattr(p, f.name)!r}" for f in dataclasses.fields(p))
     pitch = f"pitch {p.pixel_pitch_m * 1e6:.4g} µm, fill {p.fill_factor:.3g}, QE {p.qe:.3g}"
     if kind == "spad":
         return (f"{pitch}, bin {format_duration_s(p.bin_s)} ({1 / p.bin_s / 1e3:.4g} kHz), gate {format_duration_s(p.gate_s)}, "

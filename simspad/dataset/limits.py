@@ -3,9 +3,10 @@
 Per-field type checks live in :mod:`simspad.dataset.spec_validation`; this module adds what needs several fields
 or a bound with a figure: each sequence's render size, samples and keyframe count
 (:func:`simspad.render.settings.render_limit_problems`), every sensor's model checks at the sequence's size
-(the same ones the simulators run, so nothing fails after rendering), the lux range, the event camera's noise
-work (:func:`simspad.sensors.events.model.noise_work_problem`, a lower bound whatever the scene), and the number
-of frames, SPAD bins and ground-truth instants of each recording (at least one, at most
+(the same ones the simulators run, so nothing fails after rendering) and its own bounds (its sensor-table row's
+``spec_problems``: the SPAD's shortest bin, the event camera's noise work, a lower bound whatever the scene), the
+lux range, and the number of rows of every sensor stream with a size model (frames, SPAD bins) and of
+ground-truth instants of each recording (at least one, at most
 :data:`~simspad.defaults.MAX_SAMPLES_PER_RECORDING`).
 """
 
@@ -14,9 +15,7 @@ from __future__ import annotations
 from simspad import defaults
 from simspad.errors import SimSpadError
 from simspad.render.settings import limits_ignored, render_limit_problems
-from simspad.sensors.events import model as events_model
-from simspad.sensors.frames import model as frames_model
-from simspad.sensors.spad import model as spad_model
+from simspad.sensors.registry import ordered
 
 _SETTINGS_FIELD = {"duration": "duration_s"}
 
@@ -29,28 +28,18 @@ def spec_limit_problems(spec) -> list[tuple[str, str]]:
         if not lo <= lux <= hi:
             out.append((f"lux[{i}]", f"{lux:g} lx is outside {lo:g}–{hi:g} lx (starlight is ~1e-3 lx, direct "
                         "sunlight ~1e5 lx): such a level gives NaN or all-zero images"))
-    for kind, checker in (("spad", spad_model.validate_params), ("events", events_model.validate_params)):
-        if kind in spec.sensors:
-            out += _model_problems(checker, spec.sensors[kind].params)
-    spad = spec.sensors.get("spad")
-    if spad is not None and not spad.params.bin_s >= defaults.MIN_SPAD_BIN_S:
-        out.append(("sensors.spad.bin_s", f"{spad.params.bin_s!r} s is below {defaults.MIN_SPAD_BIN_S:g} s (shorter "
-                    "than any SPAD's dead time)"))
+    sensors = ordered({kind: s.params for kind, s in spec.sensors.items()})
     for i, seq in enumerate(spec.sequences):
         where = f"sequences[{i}]"
         w, h = seq.resolution
         for field_name, message in render_limit_problems(w, h, seq.spp, seq.max_flow_px, seq.min_rate_hz,
                                                          seq.duration_s):
             out.append((f"{where}.{_SETTINGS_FIELD.get(field_name, field_name)}", message))
-        if "frames" in spec.sensors:
-            out += _model_problems(frames_model.validate_params, spec.sensors["frames"].params, h)
-        out += _count_problems(spec, seq, where)
-        if "events" in spec.sensors:
-            params = spec.sensors["events"].params
-            for lux in spec.lux:
-                problem = events_model.noise_work_problem(params, w * h, seq.duration_s, lux)
-                if problem:
-                    out.append((events_model.noise_field(params, lux), f"{where}: {problem}"))
+        for row, params in sensors:  # each sensor's model checks at this size, then its own bounds
+            out += _model_problems(row.validate, params, h)
+            if row.spec_problems is not None:
+                out += row.spec_problems(params, where, w, h, seq.duration_s, tuple(spec.lux))
+        out += _count_problems(spec, seq, where, sensors)
     return list(dict.fromkeys(out))  # a sensor problem found for every sequence is reported once
 
 
@@ -64,16 +53,17 @@ def _model_problems(checker, *args) -> list[tuple[str, str]]:
     return []
 
 
-def _count_problems(spec, seq, where: str) -> list[tuple[str, str]]:
-    """At least one sample of every stream the recording holds; at most MAX_SAMPLES_PER_RECORDING of each."""
+def _count_problems(spec, seq, where: str, sensors) -> list[tuple[str, str]]:
+    """At least one sample of every stream the recording holds; at most MAX_SAMPLES_PER_RECORDING of each (the
+    sensors' rows per second from their table rows' size model; ``sensors``: (row, params) in table order)."""
     out = []
     rates = {"evaluation.rate_hz": spec.evaluation.rate_hz, "ground-truth rate": defaults.GT_RATE_HZ}
-    if "frames" in spec.sensors:
-        rates["sensors.frames.frame_rate_hz"] = spec.sensors["frames"].params.frame_rate_hz
-    if "spad" in spec.sensors:
-        rates["sensors.spad.bin_s"] = 1.0 / spec.sensors["spad"].params.bin_s
+    for row, params in sensors:
+        if row.rows is not None:
+            rates[f"sensors.{row.name}.{row.rate_field}"] = row.rows(params, 1.0)
     for name, rate_hz in rates.items():
-        if not name.endswith("bin_s") and rate_hz > defaults.MAX_RATE_HZ and not limits_ignored():
+        # a period (bin_s) is bounded by its model's check, a rate by MAX_RATE_HZ
+        if not name.endswith("_s") and rate_hz > defaults.MAX_RATE_HZ and not limits_ignored():
             out.append((name, f"{rate_hz:.3g} Hz is above the limit of {defaults.MAX_RATE_HZ:.3g} Hz (set "
                         "SIMSPAD_IGNORE_LIMITS=1 to try anyway)"))
             continue

@@ -143,13 +143,28 @@ class EventParams(_PixelArea):
     fraction of the pixel's smaller threshold of its exact path (sets crossing-time accuracy)."""
 
 
+#: Presets by kind: name → parameters. The built-in sensors' are here, beside their classes (their models import
+#: the classes from this module); a sensor added to the table (:func:`simspad.sensors.registry.register`) brings
+#: its own, added by :func:`register_presets`.
 PRESETS: dict[str, dict[str, object]] = {
     "spad": {"swissspad2": SpadParams()},
     "frames": {"blackfly_s": FrameParams()},
     "events": {"prophesee_gen4": EventParams()},
 }
 
+#: The preset of each kind used when none is named.
 DEFAULT_PRESET = {"spad": "swissspad2", "frames": "blackfly_s", "events": "prophesee_gen4"}
+
+
+def register_presets(kind: str, presets, default: str) -> None:
+    """Add the presets of a new sensor ``kind`` (called by :func:`simspad.sensors.registry.register`; the
+    built-in kinds' tables are the ones above, so registering them again changes nothing)."""
+    if PRESETS.get(kind) is presets and DEFAULT_PRESET.get(kind) == default:
+        return
+    if kind in PRESETS:
+        raise ValueError(f"presets of sensor {kind!r} are registered already")
+    PRESETS[kind] = dict(presets)
+    DEFAULT_PRESET[kind] = default
 
 
 def sensor_params(kind: str, preset: str | None = None, overrides: dict | None = None):
@@ -158,7 +173,7 @@ def sensor_params(kind: str, preset: str | None = None, overrides: dict | None =
     Raises ``ValueError`` (with a message naming the field) on an unknown kind, preset or field, or a value of
     the wrong type; callers attach the file name.
     """
-    if kind not in SENSOR_KINDS:
+    if kind not in SENSOR_KINDS or kind not in PRESETS:
         raise ValueError(f"unknown sensor {kind!r} (expected one of {', '.join(SENSOR_KINDS)})")
     preset = preset or DEFAULT_PRESET[kind]
     if preset not in PRESETS[kind]:

@@ -1,36 +1,38 @@
 """How big a recording will be, checked before simulating: a unit slip (keyframe times in µs written as seconds)
 must be refused with the figure, not discovered after gigabytes are written.
 
-The estimate counts what is known from the interval and the parameters alone: SPAD bit planes (one bit per pixel
-per bin), frames (uint16 per pixel) and the ground truth (float32 flux and depth per instant); events depend on
-the scene and are not counted, nor is the ground truth's geometry (instances, flow, validity, velocity: stored
-compressed, measured by ``simspad generate --estimate``). Compressed layouts only make the file smaller.
+The estimate counts what is known from the interval and the parameters alone, by each sensor-table row's size
+model (``rows``, ``row_bytes``): SPAD bit planes (one bit per pixel per bin), frames (uint16 per pixel), and the
+ground truth (float32 flux and depth per instant); events depend on the scene and are not counted, nor is the
+ground truth's geometry (instances, flow, validity, velocity: stored compressed, measured by
+``simspad generate --estimate``). Compressed layouts only make the file smaller.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 from pathlib import Path
 
 from simspad import defaults
 from simspad.errors import SimSpadError
+from simspad.sensors.registry import SENSORS, ordered
 
 
 def recording_samples(sensors: dict, duration_s: float, gt_rate_hz: float) -> dict[str, float]:
-    """Rows per stream of a recording of ``duration_s``: SPAD bins, frames, ground-truth instants."""
+    """Rows per stream of a recording of ``duration_s``: ground-truth instants, then each sensor's rows by its
+    table row's size model (SPAD bins, frames; none for events)."""
     out = {"gt": duration_s * gt_rate_hz}
-    if "spad" in sensors:
-        out["spad"] = duration_s / sensors["spad"].bin_s
-    if "frames" in sensors:
-        out["frames"] = duration_s * sensors["frames"].frame_rate_hz
+    for row, params in ordered(sensors):
+        if row.rows is not None:
+            out[row.name] = row.rows(params, duration_s)
     return out
 
 
 def recording_bytes(samples: dict[str, float], width: int, height: int) -> float:
     """Bytes of the counted streams (events excluded)."""
-    per_row = {"spad": height * math.ceil(width / 8), "frames": 2 * width * height, "gt": 8 * width * height}
+    per_row = {"gt": 8 * width * height}
+    per_row.update({k: SENSORS[k].row_bytes(width, height) for k in samples if k != "gt"})
     return sum(n * per_row[k] for k, n in samples.items())
 
 

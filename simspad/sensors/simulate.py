@@ -2,7 +2,8 @@
 
 Flow: open the render directory as a :class:`~simspad.radiance.timeline.Timeline`; scale it to sensor-plane photon
 irradiance so that the first keyframe's mean luminance corresponds to the lux level (docs/sensors.md); run each
-requested sensor on ``[start_s, start_s + duration_s]`` with its own random stream
+requested sensor on ``[start_s, start_s + duration_s]``, in the order of the sensor table
+(:mod:`simspad.sensors.registry`, whose rows give each kind's checks and simulator), with its own random stream
 ``child_rng(seed, *stream_key, kind)``; write the ground truth; all inside one
 :class:`~simspad.io.recording.RecordingWriter`, so a failure anywhere leaves no file behind.
 """
@@ -23,9 +24,9 @@ from simspad.io.recording import RecordingWriter
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_rng
 from simspad.radiance.timeline import Timeline
-from simspad.sensors import events, frames, spad
 from simspad.sensors.ground_truth import write_ground_truth
-from simspad.sensors.presets import SENSOR_KINDS, params_to_attrs
+from simspad.sensors.presets import params_to_attrs
+from simspad.sensors.registry import ordered
 from simspad.sensors.render_noise import render_noise_attrs
 from simspad.sensors.recording_size import check_recording_size
 
@@ -42,8 +43,8 @@ class RecordingSettings:
     lux : float
         Scene illuminance, lx (> 0).
     sensors : dict
-        ``{kind: params}`` with kind in ``"spad"``, ``"frames"``, ``"events"`` and the parameter dataclass of
-        :func:`simspad.sensors.presets.sensor_params`.
+        ``{kind: params}`` with kind a row of the sensor table (``"spad"``, ``"frames"``, ``"events"``, …) and
+        the parameter dataclass of :func:`simspad.sensors.presets.sensor_params`.
     start_s, duration_s : float, optional
         Interval to simulate, s; default from the first to the last keyframe.
     seed : int or SeedSequence
@@ -104,50 +105,36 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     if not defaults.LUX_RANGE[0] <= lux <= defaults.LUX_RANGE[1]:
         raise SimSpadError(f"{lux:g} lx is outside {defaults.LUX_RANGE[0]:g}–{defaults.LUX_RANGE[1]:g} lx (such a level "
                            "gives NaN or all-zero images)", field="lux")
-    for kind in sensors:
-        if kind not in SENSOR_KINDS:
-            raise SimSpadError(f"unknown sensor {kind!r} (expected one of {', '.join(SENSOR_KINDS)})",
-                               field="sensors")
+    rows = ordered(sensors)  # unknown kinds refused here
     optics = settings.optics or Optics()
     settings = replace(settings, optics=optics)
     out_path = Path(out_path)
     tl = Timeline.open(render_dir)
-    _validate_sensors(sensors, tl.height)
+    for row, params in rows:  # every model check before anything is written (one message naming the field)
+        row.validate(params, tl.height)
     t0, t1 = _interval(tl, settings.start_s, settings.duration_s, render_dir)
     check_recording_size(sensors, t1 - t0, tl.width, tl.height, settings.gt_rate_hz, out_path)  # before any write
     flux_tl = tl.photon_flux(lux, optics)
-    if "events" in sensors:
-        events.check_noise_work(flux_tl, t0, t1, sensors["events"], lux)  # hours of noise draws: refused now
-    runners = {"spad": lambda w, p, rng: spad.simulate_spad(w, flux_tl, t0, t1, p, rng, progress),
-               "frames": lambda w, p, rng: frames.simulate_frames(w, flux_tl, t0, t1, p, rng, progress),
-               "events": lambda w, p, rng: events.simulate_events(w, flux_tl, t0, t1, p, rng, lux, progress)}
+    for row, params in rows:
+        if row.precheck is not None:  # e.g. hours of event-noise draws: refused now
+            row.precheck(flux_tl, t0, t1, params, lux)
     attrs = _root_attrs(tl, render_dir, settings, t0=t0, t1=t1, flux_scale=flux_tl.scale, metadata=metadata)
     attrs.update(render_noise_attrs(flux_tl, render_dir, sensors.get("events")))
     common = {"lux": float(lux), "flux_scale": float(flux_tl.scale),
               **{f"optics_{k}": v for k, v in optics.to_attrs().items()}}
     with RecordingWriter(out_path, attrs) as writer:
         frame_exposure_s = None
-        for kind in ("spad", "frames", "events"):
-            if kind in sensors:
-                written = runners[kind](writer, sensors[kind], child_rng(seed, *stream_key, kind))
-                if kind == "frames" and isinstance(written, dict):
-                    frame_exposure_s = written.get("exposure_s")
-                writer.set_attrs(kind, **common)
+        for row, params in rows:
+            written = row.simulate(writer, flux_tl, t0, t1, params, child_rng(seed, *stream_key, row.name),
+                                   lux=lux, progress=progress)
+            if row.name == "frames" and isinstance(written, dict):  # the frame camera's exposure sets its blur
+                frame_exposure_s = written.get("exposure_s")
+            writer.set_attrs(row.name, **common)
         write_ground_truth(writer, flux_tl, t0, t1, settings.gt_rate_hz)
         writer.set_attrs("gt", **common)
         if motion_attrs is not None:
             writer.set_attrs("/", **motion_attrs(frame_exposure_s))
     return out_path
-
-
-def _validate_sensors(sensors: dict, height: int) -> None:
-    """Check every sensor's parameters before anything is written (fail fast, one message naming the field)."""
-    if "spad" in sensors:
-        spad.validate_params(sensors["spad"])
-    if "frames" in sensors:
-        frames.validate_params(sensors["frames"], height)
-    if "events" in sensors:
-        events.validate_params(sensors["events"])
 
 
 def _interval(tl: Timeline, start_s, duration_s, render_dir) -> tuple[float, float]:
@@ -199,7 +186,7 @@ def _root_attrs(tl: Timeline, render_dir, settings: RecordingSettings, *, t0, t1
         "t_end_s": float(t1),
         "time_origin_s": 0.0,
         "gt_rate_hz": float(gt_rate_hz),
-        "sensors": ",".join(k for k in ("spad", "frames", "events") if k in sensors),
+        "sensors": ",".join(row.name for row, _ in ordered(sensors)),
         "flux_scale": float(flux_scale),
         "optics": optics.to_attrs(),
         "spec": spec,

@@ -1,24 +1,26 @@
-"""Open a recording and run the exporter of the requested format (:data:`simspad.io.export.FORMATS`)."""
+"""Open a recording and run the exporter of the requested format (its row of :data:`simspad.io.export.EXPORTERS`)."""
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 from simspad.errors import SimSpadError
-from simspad.io.export import FORMATS
-from simspad.io.export.aedat4 import export_aedat4
-from simspad.io.export.dsec import export_dsec
-from simspad.io.export.dsec_flow import export_dsec_flow
-from simspad.io.export.evt3 import export_evt3
-from simspad.io.export.spad_frames import export_spad_frames
+from simspad.io.export import EXPORTERS
 from simspad.io.recording import open_recording
 
-_WRITERS = {"dsec": export_dsec, "aedat4": export_aedat4, "evt3": export_evt3, "npz": export_spad_frames,
-            "dsec-flow": export_dsec_flow}
+
+def exporter(fmt: str):
+    """The exporter function of format ``fmt`` (its module imported now); SimSpadError naming ``--to`` and the
+    known formats for another name."""
+    if fmt not in EXPORTERS:
+        raise SimSpadError(f"unknown export format {fmt!r} (expected one of {', '.join(EXPORTERS)})", field="--to")
+    module, _, function = EXPORTERS[fmt].exporter.partition(":")
+    return getattr(importlib.import_module(f"{__package__}.{module}"), function)
 
 
 def export_recording(recording: str | Path, fmt: str, out: str | Path, **options) -> Path:
-    """Export the recording file ``recording`` to ``out`` in format ``fmt`` (a key of ``FORMATS``).
+    """Export the recording file ``recording`` to ``out`` in format ``fmt`` (a key of ``EXPORTERS``).
 
     ``options`` go to the format's exporter (``chunk_events``; for npz ``packing``, ``frames_format``,
     ``chunk_bins``; for dsec-flow ``stride``).
@@ -29,7 +31,6 @@ def export_recording(recording: str | Path, fmt: str, out: str | Path, **options
         Unknown format, an unreadable recording (naming file and field), or a recording without the sensor the
         format needs.
     """
-    if fmt not in FORMATS:
-        raise SimSpadError(f"unknown export format {fmt!r} (expected one of {', '.join(FORMATS)})", field="--to")
+    write = exporter(fmt)
     with open_recording(recording) as rec:
-        return _WRITERS[fmt](rec, Path(out), **options)
+        return write(rec, Path(out), **options)

@@ -4,7 +4,8 @@
 structure or in one of its values (:mod:`.validation`), with one clear message naming the file, the field and the
 first bad index; a file validated before in the process and unchanged since is not read again. Methods read
 recordings only through :class:`Recording` and its views (``rec.gt``, ``rec.poses``, ``rec.spad``, ``rec.frames``,
-``rec.events``), so they run unchanged on real captures converted to this layout.
+``rec.events``; one per row of the sensor table :data:`~simspad.io.recording.layout.SENSOR_LAYOUTS`), so they run
+unchanged on real captures converted to this layout.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from simspad.io.hdf5 import decode_attr, open_checked
 from simspad.io.recording.events import EventsView
 from simspad.io.recording.frames import FramesView
 from simspad.io.recording.ground_truth import GroundTruthView, PosesView
-from simspad.io.recording.layout import FORMAT, FORMAT_VERSION, SENSOR_KINDS
+from simspad.io.recording.group import GroupView
+from simspad.io.recording.layout import FORMAT, FORMAT_VERSION, SENSOR_KINDS, SENSOR_LAYOUTS
 from simspad.io.recording.spad import SpadView
 from simspad.io.recording.validation import validate_recording
 
@@ -43,7 +45,15 @@ class Recording:
         ``/frames``: ``attrs``, ``t_start``, ``t_end``, ``n_frames``, ``dn(index)``.
     events : EventsView
         ``/events``: ``attrs``, ``n_events``, ``ms_to_idx``, ``window(t0_s, t1_s)``, ``iter_chunks``, …
+
+    Every sensor kind of :data:`~simspad.io.recording.layout.SENSOR_LAYOUTS` has its view as the attribute of its
+    name (a registered sensor ``toy`` as ``rec.toy``), built by its layout row's ``view``; :meth:`view` gives it
+    by name.
     """
+
+    spad: SpadView
+    frames: FramesView
+    events: EventsView
 
     def __init__(self, path: Path, h5: h5py.File, attrs: dict[str, dict] | None = None):
         self.path = path
@@ -52,11 +62,18 @@ class Recording:
         self.attrs = attrs["/"] if "/" in attrs else {k: decode_attr(v) for k, v in h5.attrs.items()}
         self.gt = GroundTruthView(h5, path, "gt")
         self.poses = PosesView(h5, path, "poses")
-        self.spad = SpadView(h5, path, self.width, self.height)
-        self.frames = FramesView(h5, path, "frames")
-        self.events = EventsView(h5, path)
-        for view in (self.gt, self.poses, self.spad, self.frames, self.events):
+        self._views: dict[str, GroupView] = {kind: row.view(h5, path, self.width, self.height)
+                                             for kind, row in SENSOR_LAYOUTS.items()}
+        for view in (self.gt, self.poses, *self._views.values()):
             view.preset_attrs(attrs.get(view.name))
+        self.__dict__.update(self._views)
+
+    def view(self, kind: str) -> GroupView:
+        """The read view of the sensor group ``kind`` (KeyError naming the known kinds for another name)."""
+        try:
+            return self._views[kind]
+        except KeyError:
+            raise KeyError(f"no sensor {kind!r} (expected one of {', '.join(self._views)})") from None
 
     def __enter__(self) -> "Recording":
         return self

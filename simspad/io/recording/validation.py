@@ -32,7 +32,7 @@ import numpy as np
 from simspad import defaults
 from simspad.errors import InputError
 from simspad.io.hdf5 import decode_attr
-from simspad.io.recording.layout import REQUIRED_DATASETS, REQUIRED_GROUP_ATTRS, REQUIRED_ROOT_ATTRS
+from simspad.io.recording.layout import REQUIRED_ROOT_ATTRS, SENSOR_KINDS, SENSOR_LAYOUTS
 
 #: Most bytes of one dataset read at a time while checking values.
 CHUNK_BYTES = 16 * 2**20
@@ -45,17 +45,22 @@ SPAN_TOL_S = 1e-9
 #: Event labels of docs/format.md: 0 signal, 1 shot noise, 2 leak, 3 hot pixel.
 MAX_LABEL = 3
 
-#: dtype and rank of every dataset of the format; the leading axis is the sample axis.
+#: dtype and rank of every dataset of the non-sensor groups; a sensor's are in its row of
+#: :data:`.layout.SENSOR_LAYOUTS` (:func:`_dataset_kind`). The leading axis is the sample axis.
 DATASETS = {
     "gt/t": ("float64", 1), "gt/flux": ("float32", 3), "gt/depth": ("float32", 3),
     "poses/t": ("float64", 1), "poses/camera_to_world": ("float64", 3),
-    "spad/bits": ("uint8", 3), "spad/t_start": ("float64", 1), "spad/dcr_cps": ("float32", 2),
-    "frames/dn": ("uint16", 3), "frames/t_start": ("float64", 1), "frames/t_end": ("float64", 1),
-    "events/t": ("int64", 1), "events/x": ("uint16", 1), "events/y": ("uint16", 1), "events/p": ("uint8", 1),
-    "events/label": ("uint8", 1), "events/ms_to_idx": ("uint64", 1),
 }
-#: Datasets a group must hold when it is present (:mod:`.layout`; ``/poses`` holds both of its own).
-REQUIRED = {**REQUIRED_DATASETS, "poses": ("poses/t", "poses/camera_to_world")}
+#: Datasets a non-sensor group must hold when it is present (``/poses`` holds both of its own).
+REQUIRED = {"gt": ("gt/t", "gt/flux"), "poses": ("poses/t", "poses/camera_to_world")}
+
+
+def _dataset_kind(name: str) -> tuple[str, int]:
+    """(dtype, rank) of the dataset ``name`` (``group/dataset``): :data:`DATASETS` or its sensor's layout row."""
+    if name in DATASETS:
+        return DATASETS[name]
+    group, _, leaf = name.partition("/")
+    return SENSOR_LAYOUTS[group].datasets[leaf]
 
 # Attribute kinds: "pos" finite > 0, "nonneg" finite ≥ 0, "float" finite, "nonneg_or_nan" ≥ 0 or NaN (not measured),
 # "unit" in (0, 1], "count" integer ≥ 0, "posint" integer ≥ 1, "str" text, "json" JSON text, "json_object" JSON
@@ -72,26 +77,9 @@ ROOT_ATTRS = {
     "recording_hash": "str", "created_utc": "str", "stream_key": "json",
     "optics": "json_object", "spec": "json_object",
 }
-#: Attributes of each group: name → kind; those the readers and methods use, and the counts (the required ones:
-#: :data:`.layout.REQUIRED_GROUP_ATTRS`).
-GROUP_ATTRS = {
-    "gt": {"rate_hz": "pos"}, "poses": {},
-    "spad": {"bin_s": "pos", "gate_s": "pos", "pixel_pitch_m": "pos",
-             "fill_factor": "unit", "qe": "unit", "n_bins": "count",
-             "frame_rate_hz": "pos", "detection_area_m2": "pos", "dead_time_s": "nonneg",
-             "dcr_median_cps": "nonneg", "compression": "str", "gate_auto": "bool"},
-    "frames": {"gain_dn_per_e": "pos", "black_level_dn": "nonneg", "bit_depth": "count",
-               "qe": "unit", "pixel_pitch_m": "pos", "fill_factor": "unit",
-               "read_noise_e": "nonneg", "full_well_e": "pos", "exposure_s": "pos",
-               "frame_rate_hz": "pos", "frame_period_s": "pos", "n_frames": "count",
-               "dn_max": "count", "rgb": "bool", "rolling_shutter_line_s": "nonneg"},
-    "events": {"threshold_on": "pos", "threshold_off": "pos", "threshold_sigma": "nonneg",
-               "refractory_s": "nonneg", "pixel_pitch_m": "pos", "fill_factor": "unit",
-               "qe": "unit", "dark_current_e_s": "nonneg",
-               "photoreceptor_cutoff_hz_max": "pos", "photoreceptor_cutoff_ref_rate_e_s": "pos",
-               "n_events": "count", "ms_to_idx_origin_us": "count", "labels": "json_object",
-               "timestamp_unit": "str"},
-}
+#: Attributes of each non-sensor group: name → kind; a sensor group's are its layout row's ``attrs`` (those the
+#: readers and methods use, and the counts; the required ones: its ``required_attrs``).
+GROUP_ATTRS = {"gt": {"rate_hz": "pos"}, "poses": {}}
 _EXPECT = {"pos": "a finite number > 0", "nonneg": "a finite number ≥ 0", "float": "a finite number",
            "nonneg_or_nan": "a number ≥ 0 (or NaN)", "unit": "a number in (0, 1]", "count": "an integer ≥ 0",
            "posint": "a positive integer", "str": "a string", "json": "JSON text",
@@ -149,22 +137,35 @@ class _Check:
                     f"{self.width} × {self.height} pixels")
         self._span()
         self._spec()
-        for group in ("gt", "poses", "spad", "frames", "events"):
+        for group in ("gt", "poses", *SENSOR_KINDS):
             if group not in self.h5:
                 continue
             if not isinstance(self.h5[group], h5py.Group):
                 self.fail(f"/{group}", "expected a group, found a dataset")
-            self.group_attrs[group] = self._read_attrs(self.h5[group], f"/{group}.", GROUP_ATTRS[group],
-                                                       REQUIRED_GROUP_ATTRS.get(group, ()))
-            for name in REQUIRED[group]:
+            if group in SENSOR_LAYOUTS:
+                row = SENSOR_LAYOUTS[group]
+                table, required_attrs = row.attrs, row.required_attrs
+                required = tuple(f"{group}/{d}" for d in row.required)
+            else:
+                table, required_attrs, required = GROUP_ATTRS[group], (), REQUIRED[group]
+            self.group_attrs[group] = self._read_attrs(self.h5[group], f"/{group}.", table, required_attrs)
+            for name in required:
                 self._dataset(name, required=True)
         self._dataset("gt/depth", required=False)
-        self._dataset("events/label", required=False)
+        for kind in SENSOR_KINDS:  # the optional datasets of the sensors present (events/label)
+            if kind in self.h5:
+                row = SENSOR_LAYOUTS[kind]
+                for leaf in row.datasets:
+                    if leaf not in row.required:
+                        self._dataset(f"{kind}/{leaf}", required=False)
         self._shapes()
         self._sensor_attrs()
         if "sensors" in self.attrs:
             listed = {s.strip() for s in str(self.attrs["sensors"]).split(",") if s.strip()}
-            present = {g for g in ("spad", "frames", "events") if g in self.h5}
+            present = {g for g in SENSOR_KINDS if g in self.h5}
+            # a kind this process has no row for (a plugin sensor not installed here) is taken as listed when
+            # its group is there: the file is still readable, only that group is not offered
+            present |= {g for g in listed - set(SENSOR_KINDS) if isinstance(self.h5.get(g), h5py.Group)}
             if listed != present:
                 self.fail("/.sensors", f"lists {', '.join(sorted(listed)) or 'none'} but the file holds "
                                        f"{', '.join(sorted(present)) or 'no sensor group'}")
@@ -282,7 +283,7 @@ class _Check:
         ds = self.h5[name]
         if not isinstance(ds, h5py.Dataset):
             self.fail(f"/{name}", "expected a dataset, found a group")
-        dtype, rank = DATASETS[name]
+        dtype, rank = _dataset_kind(name)
         try:
             found = ds.dtype
         except Exception:  # noqa: BLE001 - a datatype h5py cannot map
@@ -349,6 +350,20 @@ class _Check:
                 expect(f"events/{name}", (e,), "one value per event, as /events/t")
             expect("events/ms_to_idx", (self.n_ms,), "one entry per millisecond from t = 0 to t_end_s, "
                                                        "ceil(t_end_s / 1 ms) + 1")
+        for kind, row in self._generic_sensors():
+            n = self.ds[f"{kind}/{row.instants}"].shape[0]
+            self._limit(f"/{kind}/{row.instants}", n, defaults.MAX_SAMPLES_PER_RECORDING, f"{n} samples")
+            for leaf in row.datasets:
+                name = f"{kind}/{leaf}"
+                if name in self.ds and self.ds[name].shape[:1] != (n,):
+                    self.fail(f"/{name}", f"shape {self.ds[name].shape}, expected {n} rows (one per "
+                                          f"/{kind}/{row.instants} instant)")
+
+    def _generic_sensors(self):
+        """(kind, layout row) of the sensor groups present that have no checks of their own here: those whose row
+        names its ``instants``."""
+        return [(k, SENSOR_LAYOUTS[k]) for k in SENSOR_KINDS
+                if k in self.h5 and SENSOR_LAYOUTS[k].instants is not None]
 
     def _sensor_attrs(self) -> None:
         """Cross-field rules of the sensor groups' attributes and their counts against the datasets."""
@@ -480,6 +495,9 @@ class _Check:
             self._image_values("frames/dn", "DN", f"≤ 2^bit_depth − 1 = {dn_max}", lambda b: b > dn_max)
         if "events" in h5:
             self._events()
+        for kind, row in self._generic_sensors():
+            if f"{kind}/{row.instants}" in self.ds:
+                self._instants(f"{kind}/{row.instants}", t0, t1)
 
     def _events(self) -> None:
         """Events: columns in range, timestamps sorted inside the span, ``ms_to_idx`` exact; one pass, in chunks."""
