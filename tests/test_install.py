@@ -49,7 +49,7 @@ def _run(site: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
 
 def test_wheel_imports_from_its_install_folder(installed, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(installed)}
-    out = subprocess.run([sys.executable, "-c", "import simspad, simspad.io.bundled as b; "
+    out = subprocess.run([sys.executable, "-c", "import simspad, simspad.bundled as b; "
                           "print(simspad.__file__); print(b.DATA_ROOT)"],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr

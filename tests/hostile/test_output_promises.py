@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from simspad.bundled import DATASETS_DIR
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec_validation import load_spec
-from simspad.io.bundled import DATASETS_DIR
 from simspad.io.hashing import file_sha256
 from simspad.io.render_dir import write_render_dir
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simspad.io.bundled import TRAJECTORIES_DIR
+from simspad.bundled import TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.retiming import base_span_s, retimed
 

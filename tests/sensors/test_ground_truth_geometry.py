@@ -28,7 +28,7 @@ import pytest
 from scipy.ndimage import map_coordinates, sobel
 from scipy.spatial.transform import Rotation
 
-from simspad.io.bundled import find_trajectory
+from simspad.bundled import find_trajectory
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.retiming import retimed
 from simspad.render.renderer import RenderSettings, render_sequence
