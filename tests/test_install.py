@@ -42,7 +42,7 @@ plan = make_plan(load_spec(default_spec_path()), "2025-01-01T00:00:00Z")
 print(json.dumps({"package": simspad.__file__, "data_root": str(b.DATA_ROOT), "specs": b.builtin_spec_names(),
                   "scenes": {s.name: str(s.default_trajectory) for s in list_scenes()},
                   "pan": str(b.find_trajectory("office_handheld_pan.toml")),
-                  "stored": sorted({r.metadata["trajectory"] for r in plan.recordings})}))
+                  "stored": sorted({dict(r.metadata)["trajectory"] for r in plan.recordings})}))
 """
 
 
