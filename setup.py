@@ -15,11 +15,20 @@ BUNDLED = ("datasets", "scenes", "trajectories")
 #: Where they go inside the installed package (simspad.bundled.PACKAGED_DATA_DIR).
 PACKAGED = "simspad._data"
 
+
+def _packages_of(folder: str) -> list[str]:
+    """The data package of a bundled folder and of each subfolder (a scene's folder, whose scene.py is listed as a
+    module of a package: setuptools deprecates shipping .py files as loose data)."""
+    subfolders = find_namespace_packages(where=folder, exclude=["__pycache__", "*.__pycache__"])
+    return [f"{PACKAGED}.{folder}", *(f"{PACKAGED}.{folder}.{sub}" for sub in subfolders)]
+
+
+DATA_PACKAGES = [package for folder in BUNDLED for package in _packages_of(folder)]
+
 setup(
-    packages=[*find_namespace_packages(include=["simspad", "simspad.*"], exclude=["*.__pycache__"]),
-              *(f"{PACKAGED}.{name}" for name in BUNDLED)],
-    package_dir={f"{PACKAGED}.{name}": name for name in BUNDLED},
-    # specs: *.toml; a scene: <name>/scene.toml + scene.py (or .xml and its files); trajectories: .toml, .csv, .txt
-    package_data={f"{PACKAGED}.datasets": ["*.toml"], f"{PACKAGED}.scenes": ["*/*"],
-                  f"{PACKAGED}.trajectories": ["*"]},
+    packages=[*find_namespace_packages(include=["simspad", "simspad.*"], exclude=["*.__pycache__"]), *DATA_PACKAGES],
+    # a subfolder's package maps below its folder's: scenes/office is simspad._data.scenes.office
+    package_dir={f"{PACKAGED}.{folder}": folder for folder in BUNDLED},
+    # every file: specs (.toml), a scene's scene.toml (and an .xml scene's files), trajectories (.toml, .csv, .txt)
+    package_data={package: ["*"] for package in DATA_PACKAGES},
 )
