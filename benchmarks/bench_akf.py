@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from simspad.methods.akf import AkfParams, AkfState, EventUpdateParams
+from simspad.processes import available_cores
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root: the tests' references
 from tests.helpers.references import akf_events_reference  # noqa: E402
@@ -83,7 +84,7 @@ def main(n_events: int = 5_000_000) -> None:
     fast_rate = n_events / t_fast
     ref_rate = n_events / t_ref
     print(f"AKF per-event update, {H}x{W} px, every noise term on, one core (wall clock; CPU time of this process "
-          f"in brackets, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
+          f"in brackets, load average {os.getloadavg()[0]:.1f} on {available_cores()} cores)")
     print(f"  numba kernel     : {n_events:>10,d} events in {t_fast:7.3f} s = {fast_rate / 1e6:8.2f} M events/s"
           f"  [{n_events / c_fast / 1e6:6.2f}]  (random pixels)")
     print(f"  numba, sweep     : {n_events:>10,d} events in {t_coh:7.3f} s = {n_events / t_coh / 1e6:8.2f} M events/s"

@@ -37,11 +37,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from simspad.bundled import DATASETS_DIR  # noqa: E402
 from simspad.dataset.executors import ExecutorConfig, default_workers, job_environment  # noqa: E402
 from simspad.dataset.generate import generate  # noqa: E402
 from simspad.dataset.plan import make_plan  # noqa: E402
 from simspad.dataset.spec_validation import load_spec, spec_from_dict  # noqa: E402
-from simspad.io.bundled import DATASETS_DIR  # noqa: E402
 from simspad.io.manifest import read_manifest  # noqa: E402
 
 GIB = 1024**3

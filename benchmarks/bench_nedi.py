@@ -19,6 +19,7 @@ import numpy as np
 
 from simspad.methods.event_batches import EventBatch
 from simspad.methods.nedi import nedi_deblur
+from simspad.processes import available_cores
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root: the tests' references
 from tests.helpers.references import nedi_reference  # noqa: E402
@@ -57,7 +58,7 @@ def main(side: int = 512) -> None:
     assert np.allclose(phi[live], ref[live], rtol=1e-9, atol=0), "NEDI and the vectorised reference disagree"
     n_pix = side * side
     print(f"NEDI, one aggregate of {N_BINS} bins, {len(batch) / n_pix:.1f} events/pixel, one core (wall clock; "
-          f"CPU time in brackets, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
+          f"CPU time in brackets, load average {os.getloadavg()[0]:.1f} on {available_cores()} cores)")
     print(f"  numba solver     : {n_pix:>8,d} px in {t_fast:7.3f} s = {n_pix / t_fast / 1e6:8.3f} M px/s"
           f"  [{n_pix / c_fast / 1e6:7.3f}]")
     print(f"  SciPy vectorised : {n_pix:>8,d} px in {t_ref_s:7.3f} s = {n_pix / t_ref_s / 1e6:8.3f} M px/s"

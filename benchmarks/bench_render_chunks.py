@@ -31,6 +31,7 @@ from simspad.dataset.executors import LocalExecutor, job_environment  # noqa: E4
 from simspad.dataset.plan import RenderTask  # noqa: E402
 from simspad.dataset.spec import SequenceSpec  # noqa: E402
 from simspad.dataset.task_queue import Job, TaskQueue  # noqa: E402
+from simspad.processes import available_cores  # noqa: E402
 from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks  # noqa: E402
 from simspad.render.renderer import finalize_render  # noqa: E402
 from simspad.render.settings import RenderSettings  # noqa: E402
@@ -87,7 +88,7 @@ def main(argv=None) -> int:
                        min_rate_hz=defaults.min_rate_hz)
     task = RenderTask(seq, "0" * 64, "renders/bench", 1)
     print(f"one sequence: {args.scene}, {args.resolution[0]}×{args.resolution[1]} px, {args.spp} spp, "
-          f"{args.duration * 1e3:g} ms; {os.cpu_count()} cores")
+          f"{args.duration * 1e3:g} ms; {available_cores()} cores")
     base_s, base_digest = None, None
     with tempfile.TemporaryDirectory(prefix="bench_render_chunks_") as d:
         for n in args.workers:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from simspad.bundled import bundled_relative
 from simspad.cli.text import format_duration_s
 from simspad.dataset.spec_hashing import spec_hash
 from simspad.dataset.spec_validation import load_spec
-from simspad.io.bundled import DATA_ROOT
 from simspad.scenes.library import resolve_scene
 
 
@@ -35,14 +35,12 @@ def describe_spec(path) -> str:
 
 
 def _short(path) -> str:
-    """``path`` relative to the current directory or the repository when inside them."""
+    """``path`` relative to the current directory when inside it, else a bundled file as ``trajectories/<file>``."""
     p = Path(path)
-    for root in (Path.cwd(), DATA_ROOT):
-        try:
-            return str(p.relative_to(root))
-        except ValueError:
-            continue
-    return str(p)
+    try:
+        return str(p.relative_to(Path.cwd()))
+    except ValueError:
+        return bundled_relative(p) or str(p)
 
 
 def _default_trajectory_text(scene: str) -> str:

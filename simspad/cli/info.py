@@ -12,11 +12,11 @@ from pathlib import Path
 
 import click
 
+from simspad.bundled import find_trajectory
 from simspad.cli.describe import describe_dataset, describe_recording
 from simspad.cli.describe_spec import describe_spec
 from simspad.cli.describe_trajectory import describe_trajectory
 from simspad.dataset.spec import find_spec
-from simspad.io.bundled import find_trajectory
 from simspad.errors import SimSpadError
 
 _TRAJECTORY_SUFFIXES = (".json", ".csv", ".txt", ".tum")

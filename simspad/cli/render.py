@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from simspad.io.bundled import find_trajectory
+from simspad.bundled import find_trajectory
 from simspad.io.output_dirs import owned_dir_in_place, write_marker
 from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.render.render_summary import RenderSummary

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
+from simspad.bundled import bundled_relative
 from simspad.io.atomic import PNG_MAGIC, check_output_file, starts_with
-from simspad.io.bundled import DATA_ROOT
 from simspad.render.contact_sheet import write_contact_sheet
 from simspad.scenes.library import list_scenes
 
@@ -30,8 +30,5 @@ def scenes_from_cli(contact_sheet: Path | None = None) -> None:
 
 
 def _display_path(path: Path) -> str:
-    """``path`` relative to the repository when it lies inside it (as bundled trajectories do)."""
-    try:
-        return path.resolve().relative_to(DATA_ROOT).as_posix()
-    except ValueError:
-        return str(path)
+    """A bundled trajectory as ``trajectories/<file>`` (what ``--trajectory`` accepts), any other path as it is."""
+    return bundled_relative(path) or str(path)

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
-import ctypes
 import multiprocessing
 import os
 import signal
@@ -36,7 +35,7 @@ from simspad.dataset.fault_injection import maybe_inject_fault
 from simspad.dataset.speed import sequence_trajectories
 from simspad.errors import SimSpadError
 from simspad.io.hashing import file_sha256
-from simspad.io.worker_signals import ignore_sigint, sigint_blocked
+from simspad.processes import available_cores, die_with_parent_and_ignore_sigint, sigint_blocked
 from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
@@ -294,23 +293,8 @@ def _motion_measurement(render_dir: Path, task, measured: dict):
 
 
 def default_workers() -> int:
-    """Cores this process may use (``sched_getaffinity``), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-def _die_with_parent() -> None:
-    """Pool initializer: on Linux ask the kernel to SIGKILL this worker when the driver dies (even by kill -9),
-    so no orphan keeps writing into the dataset after a crash."""
-    with contextlib.suppress(Exception):
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        pr_set_pdeathsig = 1
-        libc.prctl(pr_set_pdeathsig, signal.SIGKILL)
-        if os.getppid() == 1:  # the parent already died before prctl took effect
-            os._exit(1)
-    ignore_sigint()  # Ctrl-C is handled by the driver, which shuts the pool down
+    """The default number of workers: the cores this process may use (:func:`simspad.processes.available_cores`)."""
+    return available_cores()
 
 
 class LocalExecutor:
@@ -334,7 +318,8 @@ class LocalExecutor:
         self._pools = {"render": self._new_pool(), "sim": self._new_pool()}
 
     def _new_pool(self):
-        return cf.ProcessPoolExecutor(self.workers, mp_context=self._ctx, initializer=_die_with_parent)
+        return cf.ProcessPoolExecutor(self.workers, mp_context=self._ctx,
+                                      initializer=die_with_parent_and_ignore_sigint)
 
     def _pool(self, kind: str):
         pool = self._pools[kind]

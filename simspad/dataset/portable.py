@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from simspad.io.bundled import DATA_ROOT, DATASETS_DIR
+from simspad.bundled import DATASETS_DIR, bundled_relative
 from simspad.scenes.library import resolve_scene
 
 
@@ -29,7 +29,7 @@ def portable_path(path: str | Path | None, base: Path | None) -> str | None:
     p = Path(path)
     if not p.is_absolute():
         return str(path)
-    if p.resolve().is_relative_to(DATA_ROOT.resolve()):
+    if bundled_relative(p) is not None:
         return Path(os.path.relpath(p.resolve(), DATASETS_DIR.resolve())).as_posix()
     if base is None:
         return str(path)

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from simspad import defaults
-from simspad.io.bundled import DATASETS_DIR, builtin_spec_path
+from simspad.bundled import DATASETS_DIR, builtin_spec_path
 from simspad.render.settings import DEFAULT_INTERPOLATION
 from simspad.sensors.presets import params_to_attrs
 
@@ -157,7 +157,7 @@ class DatasetSpec:
 
 
 def default_spec_path() -> Path:
-    """The embedded default spec, the bundled ``mini`` (``simspad/data/datasets/mini.toml``)."""
+    """The embedded default spec, the bundled ``mini`` (``datasets/mini.toml``, :mod:`simspad.bundled`)."""
     return DATASETS_DIR / "mini.toml"
 
 

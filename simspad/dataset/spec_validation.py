@@ -14,12 +14,12 @@ import tomllib
 from pathlib import Path
 
 from simspad import defaults
+from simspad.bundled import TRAJECTORIES_DIR, bundled_trajectory_file
 from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.dataset.speed import DEFAULT_SPEEDS, coverage_problem
 from simspad.errors import SimSpadError, SpecError
 from simspad.render.settings import DEFAULT_INTERPOLATION, INTERPOLATIONS
-from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
@@ -354,12 +354,13 @@ def _check_trajectory(trajectory: str | None, scene: str, start_s: float, durati
 
 def _find_trajectory(name: str, base: Path) -> Path | None:
     p = Path(name).expanduser()
-    # The spec's folder first, then the repository's trajectories/ (and its root, for "trajectories/x.toml").
-    candidates = [p] if p.is_absolute() else [base / p, TRAJECTORIES_DIR / p, DATA_ROOT / p]
-    for c in candidates:
-        if c.is_file():
-            return c.resolve()
-    return None
+    # The spec's folder first, then the bundled trajectories/ ("x.toml" or "trajectories/x.toml").
+    if p.is_absolute():
+        return p.resolve() if p.is_file() else None
+    if (base / p).is_file():
+        return (base / p).resolve()
+    bundled = bundled_trajectory_file(p)
+    return bundled.resolve() if bundled is not None else None
 
 
 def _validate_sensors(raw: dict, err: _Errors) -> dict[str, SensorSpec]:

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
-import os
 import sys
 import threading
 import time
@@ -76,9 +75,9 @@ from simspad.io.results_dir import (
     write_images,
     write_results_dir,
 )
-from simspad.io.worker_signals import die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 from simspad.methods.registry import available_methods, check_method_params, get_method
 from simspad.physics.pairwise_sum import pairwise_sum
+from simspad.processes import available_cores, die_with_parent_and_ignore_sigint, kill_pool_workers, sigint_blocked
 
 MAX_WORKERS = 2
 
@@ -292,7 +291,7 @@ def run_tasks(tasks: list[Task], workers: int | None = None, progress: bool = Tr
 
     A progress bar on stderr counts method runs (recordings × methods) with an estimate of the time left.
     """
-    workers = min(MAX_WORKERS, len(tasks), workers or os.cpu_count() or 1)
+    workers = min(MAX_WORKERS, len(tasks), workers or available_cores())
     batches = _batches(tasks, workers)
     results: list[list[dict] | None] = [None] * len(batches)
     pool = futures = None

@@ -1,4 +1,5 @@
-"""The scene library: built-in scenes in ``scenes/`` and users' own Mitsuba 3 scenes.
+"""The scene library: built-in scenes (the bundled ``scenes/``, :mod:`simspad.bundled`) and users' own Mitsuba 3
+scenes.
 
 A scene is a folder. Built-in scenes hold ``scene.toml`` (camera id, default trajectory, description, ids of
 animated objects) and either ``scene.py`` exposing ``build() -> dict`` (for ``mi.load_dict``) or ``scene.xml``.
@@ -9,8 +10,8 @@ A user's folder holding ``scene.py`` + ``scene.toml`` is Python code: it runs on
 (``simspad --allow-python-scenes ...`` or ``SIMSPAD_ALLOW_PYTHON_SCENES=1``); otherwise it is refused, so naming
 a downloaded folder never executes it. Built-in scenes are code shipped with SimSPAD and always run.
 
-Relative ``default_trajectory`` paths resolve against the repository root for built-in scenes (they point into
-``trajectories/``) and against the scene folder for users' scenes.
+Relative ``default_trajectory`` paths resolve against the bundled data's root for built-in scenes (they point
+into the bundled ``trajectories/``, beside ``scenes/``) and against the scene folder for users' scenes.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from simspad.bundled import DATA_ROOT, SCENES_DIR
 from simspad.errors import SimSpadError
-from simspad.io.bundled import DATA_ROOT, SCENES_DIR
 
 _ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 #: Camera id assumed for a user's XML whose first perspective sensor has no id; the renderer then takes the
@@ -69,7 +70,7 @@ class SceneInfo:
     source : Path or None
         The ``scene.py`` builder or the ``.xml`` file the renderer loads.
     builtin : bool
-        True for scenes shipped in ``scenes/``.
+        True for scenes shipped in the bundled ``scenes/``.
     """
 
     name: str
@@ -83,7 +84,7 @@ class SceneInfo:
 
 
 def builtin_scene_names() -> list[str]:
-    """Names of the built-in scenes (folders of ``scenes/`` holding a ``scene.toml``), sorted."""
+    """Names of the built-in scenes (folders of the bundled ``scenes/`` holding a ``scene.toml``), sorted."""
     if not SCENES_DIR.is_dir():
         return []
     return sorted(p.name for p in SCENES_DIR.iterdir() if (p / "scene.toml").is_file())

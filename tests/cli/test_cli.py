@@ -58,7 +58,7 @@ def test_usage_error_exits_nonzero(capsys):
 
 def test_help_names_the_real_choices_and_output_defaults(capsys):
     """The help texts list the bundled specs, scenes and presets that exist, and where outputs go by default."""
-    from simspad.io.bundled import builtin_spec_names
+    from simspad.bundled import builtin_spec_names
     from simspad.scenes.library import builtin_scene_names
     from simspad.sensors.presets import PRESETS
 

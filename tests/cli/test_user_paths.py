@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from simspad.bundled import TRAJECTORIES_DIR, find_trajectory
 from simspad.dataset.estimate import Estimate, _here_line
 from simspad.dataset.executors import default_workers
-from simspad.io.bundled import TRAJECTORIES_DIR, find_trajectory
 from simspad.cli.text import recording_table
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 import shutil
 
+from simspad.bundled import TRAJECTORIES_DIR
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec_validation import load_spec
-from simspad.io.bundled import TRAJECTORIES_DIR
 
 
 def test_recording_metadata_does_not_depend_on_the_checkout_path(tmp_path):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from simspad.bundled import TRAJECTORIES_DIR
 from simspad.dataset.speed import base_span_s, retimed
-from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
 
 

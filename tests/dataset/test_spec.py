@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
+from simspad.bundled import TRAJECTORIES_DIR
 from simspad.cli import main
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, default_spec_path
 from simspad.dataset.spec_hashing import sequence_hash, spec_hash
 from simspad.dataset.spec_validation import load_spec
 from simspad.errors import SpecError
-from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.sensors.presets import EventParams, FrameParams, SpadParams
 
 SCENE_XML = """<scene version="3.0.0">

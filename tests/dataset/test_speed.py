@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
+from simspad.bundled import TRAJECTORIES_DIR
 from simspad.dataset.estimate import (
     SceneRenderCost,
     UnitCosts,
@@ -23,7 +24,6 @@ from simspad.dataset.generate import generate
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec_validation import load_spec
 from simspad.errors import SpecError
-from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.manifest import read_manifest
 from simspad.io.trajectory_files import load_trajectory
 

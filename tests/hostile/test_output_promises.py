@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from simspad.bundled import DATASETS_DIR
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec_validation import load_spec
-from simspad.io.bundled import DATASETS_DIR
 from simspad.io.hashing import file_sha256
 from simspad.io.render_dir import write_render_dir
 
@@ -55,7 +55,7 @@ def _recording_metadata(spec_path: Path) -> list[dict]:
 
 def test_bundled_trajectories_are_stored_the_same_wherever_the_spec_sits(tmp_path):
     """The bundled trajectory used to be stored as a path relative to the spec's folder
-    (``../../../…/simspad/data/trajectories/…`` for a copied spec): now it is stored relative to the bundled
+    (``../../../…/trajectories/…`` for a copied spec): now it is stored relative to the bundled
     specs' folder, as the bundled spec itself has always stored it (so those recordings keep their bytes)."""
     bundled = _recording_metadata(DATASETS_DIR / "mini.toml")
     for where in ("here", "much/deeper/down"):

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from simspad.bundled import TRAJECTORIES_DIR
 from simspad.cli import main
 from simspad.errors import InputError
-from simspad.io.bundled import TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory, save_trajectory
 from simspad.motion.generators import Tremor, handheld_shake, linear_pan, object_rotation, orbit, static_pose
 from simspad.motion.trajectory_summary import motion_summary

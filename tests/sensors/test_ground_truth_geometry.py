@@ -28,8 +28,8 @@ import pytest
 from scipy.ndimage import map_coordinates, sobel
 from scipy.spatial.transform import Rotation
 
+from simspad.bundled import find_trajectory
 from simspad.dataset.speed import retimed
-from simspad.io.bundled import find_trajectory
 from simspad.io.trajectory_files import load_trajectory
 from simspad.render.renderer import RenderSettings, render_sequence
 from simspad.sensors.simulate import RecordingSettings, simulate_recording

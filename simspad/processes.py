@@ -1,6 +1,16 @@
-"""Ctrl-C and worker processes: the driver handles it, its workers never see it.
+"""Worker processes: how many cores there are to use, and workers that die with their driver and leave Ctrl-C to it.
 
-A terminal sends Ctrl-C (SIGINT) to every process of the foreground group, so each pool worker would raise
+The process plumbing shared by the dataset driver's pools (:mod:`simspad.dataset.executors`) and the evaluation's
+(:mod:`simspad.evaluate.evaluate`); it knows nothing of SimSPAD's data.
+
+Cores: :func:`available_cores` counts the cores this process may run on (its CPU affinity, which a batch system
+or ``taskset`` narrows), not the machine's; both default worker counts come from it.
+
+Driver death: a worker started with :func:`die_with_parent_and_ignore_sigint` as its initializer is SIGKILLed by
+the kernel (Linux's ``PR_SET_PDEATHSIG``) when its driver dies, even by kill -9, so no orphan keeps computing or
+writing after a crash.
+
+Ctrl-C: a terminal sends SIGINT to every process of the foreground group, so each pool worker would raise
 ``KeyboardInterrupt`` where it happens to be — often while still importing numpy or scipy — and print its own
 traceback. Workers therefore start with SIGINT blocked (:func:`sigint_blocked` around the call that spawns them;
 a child inherits its parent's signal mask, as CPython's own resource tracker does) and ignore it from their
@@ -16,6 +26,15 @@ import os
 import signal
 import threading
 from typing import Iterator
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity, ``sched_getaffinity``; the machine's count where affinity
+    does not exist), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 @contextlib.contextmanager
