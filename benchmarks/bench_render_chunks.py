@@ -31,7 +31,7 @@ from simspad.dataset.executors import LocalExecutor, job_environment  # noqa: E4
 from simspad.dataset.plan import RenderTask  # noqa: E402
 from simspad.dataset.spec import SequenceSpec  # noqa: E402
 from simspad.dataset.task_queue import Job, TaskQueue  # noqa: E402
-from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks  # noqa: E402
+from simspad.render.render_layout import RenderLayout, chunk_size_for, keyframe_chunks  # noqa: E402
 from simspad.render.renderer import finalize_render  # noqa: E402
 from simspad.render.settings import RenderSettings  # noqa: E402
 
@@ -57,7 +57,7 @@ def render_with(task, out: Path, workers: int) -> tuple[float, int, float, float
                     todo = [i for i in range(res["n_keyframes"]) if i not in set(res["existing"])]
                     for c in keyframe_chunks(todo, chunk_size_for(len(todo), workers)):
                         queue.add(Job("chunk", c, lambda c=c: ex.submit_render_chunk(task, plan, c)))
-        finalize_render(RenderPlan.from_dict(plan), out / task.rel_dir)
+        finalize_render(RenderLayout.from_dict(plan), out / task.rel_dir)
         return time.perf_counter() - t0, len(plan["names"]), sum(per_pid.values()), max(per_pid.values())
     finally:
         ex.close()

@@ -40,17 +40,17 @@ from simspad.io.worker_signals import ignore_sigint, sigint_blocked
 from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
-from simspad.render.render_plan import RenderPlan
+from simspad.render.render_layout import RenderLayout
 from simspad.render.geometry import missing_geometry, owned_instants
 from simspad.render.renderer import (
     link_shared_keyframes,
     load_scene,
-    plan_render,
+    layout_render,
     render_keyframes,
     render_missing_geometry,
 )
 from simspad.render.settings import RenderSettings
-from simspad.render.warp_render import chunk_result, render_noise_probe, render_with_warps
+from simspad.render.warp.rendering import chunk_result, render_noise_probe, render_with_warps
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
@@ -104,13 +104,13 @@ def _set_render_threads(threads: int | None) -> None:
 
 
 def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
-    """Plan the render of one sequence (stage 1, :func:`~simspad.render.renderer.plan_render`) and create its
+    """Plan the render of one sequence (stage 1, :func:`~simspad.render.renderer.layout_render`) and create its
     directory under ``<out_dir>/<task.rel_dir>``; keyframes already there (a killed run's) are kept and counted.
 
     Returns
     -------
     dict
-        ``ok``, ``plan`` (:meth:`RenderPlan.to_dict`), ``n_keyframes``, ``existing`` (indices whose file is
+        ``ok``, ``plan`` (:meth:`RenderLayout.to_dict`), ``n_keyframes``, ``existing`` (indices whose file is
         already there), ``seconds``, ``host``; or ``ok=False`` and ``error``.
     """
     t0 = time.perf_counter()
@@ -120,7 +120,7 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         # worker, never inherit it.
         select_variant()
         final = Path(out_dir) / task.rel_dir
-        plan = plan_render_task(task)
+        plan = render_layout_of(task)
         make_out_dir(final)
         existing = [i for i, name in enumerate(plan.names) if (final / name).is_file()]
         return {"ok": True, "plan": plan.to_dict(), "n_keyframes": plan.n_keyframes, "existing": existing,
@@ -129,7 +129,7 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         return _error_result(exc, t0)
 
 
-def plan_render_task(task, planned: dict | None = None) -> RenderPlan:
+def render_layout_of(task, planned: dict | None = None) -> RenderLayout:
     """The keyframe plan of a render task: its sequence's trajectory retimed by the task's speed factor, its first
     keyframes those of its prefix (the next slower speed's render) when it has one (taken from ``planned``, plans
     by render directory, when it is there)."""
@@ -137,9 +137,9 @@ def plan_render_task(task, planned: dict | None = None) -> RenderPlan:
     trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
     prefix = None
     if task.prefix is not None:
-        prefix = (planned or {}).get(task.prefix.rel_dir) or plan_render_task(task.prefix, planned)
+        prefix = (planned or {}).get(task.prefix.rel_dir) or render_layout_of(task.prefix, planned)
     scale = 1.0 if task.prefix is None else task.prefix.speed_factor / task.speed_factor
-    return plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s,
+    return layout_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s,
                        prefix=prefix, prefix_time_scale=scale)
 
 
@@ -148,7 +148,7 @@ def plan_render_task(task, planned: dict | None = None) -> RenderPlan:
 _SCENE_CACHE: dict = {}
 
 
-def _cached_scene(seq, speed_factor: float, plan: RenderPlan):
+def _cached_scene(seq, speed_factor: float, plan: RenderLayout):
     key = (repr(seq.scene), repr(seq.trajectory), float(speed_factor), plan.width, plan.height, plan.spp,
            plan.variant, plan.scene_hash, plan.trajectory_hash)
     if key not in _SCENE_CACHE:
@@ -176,7 +176,7 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         select_variant()
         _set_render_threads(threads)
         seq = task.sequence
-        render_plan = RenderPlan.from_dict(plan)
+        render_plan = RenderLayout.from_dict(plan)
         final = Path(out_dir) / task.rel_dir
         n_linked = 0 if task.prefix is None else link_shared_keyframes(render_plan, indices,
                                                                        Path(out_dir) / task.prefix.rel_dir, final)
@@ -201,12 +201,12 @@ def _warp_worker(task, plan: dict, env: dict[str, str], threads: int | None):
     _apply_environment(env)
     select_variant()
     _set_render_threads(threads)
-    render_plan = RenderPlan.from_dict(plan)
+    render_plan = RenderLayout.from_dict(plan)
     return render_plan, _cached_scene(task.sequence, task.speed_factor, render_plan)
 
 
 def run_noise_probe(task, plan: dict, out_dir: str, env: dict[str, str], threads: int | None = None) -> dict[str, Any]:
-    """Render the noise probe of a planned render (:func:`~simspad.render.warp_render.render_noise_probe`: keyframe 0
+    """Render the noise probe of a planned render (:func:`~simspad.render.warp.rendering.render_noise_probe`: keyframe 0
     again with the next seed; the warp schedule's noise reference and every render's noise budget) into
     ``<out_dir>/<task.rel_dir>``, unless it is there.
 
@@ -229,12 +229,12 @@ def run_warp_chunk(task, plan: dict, anchors: list[int], out_dir: str, env: dict
                    threads: int | None = None) -> dict[str, Any]:
     """Synthesize the keyframes between consecutive ``anchors`` of a planned warp render (their files and the
     noise probe already there), rendering for real where the warps disagree
-    (:func:`~simspad.render.warp_render.render_with_warps`).
+    (:func:`~simspad.render.warp.rendering.render_with_warps`).
 
     Returns
     -------
     dict
-        ``ok``, ``warp`` (:func:`~simspad.render.warp_render.chunk_result`), ``n_rendered``, ``seconds``, ``cpu_s``,
+        ``ok``, ``warp`` (:func:`~simspad.render.warp.rendering.chunk_result`), ``n_rendered``, ``seconds``, ``cpu_s``,
         ``host``; or ``ok=False`` and ``error``.
     """
     t0, cpu0 = time.perf_counter(), time.process_time()

@@ -53,16 +53,16 @@ from simspad.dataset.manifest_state import (
     dataset_created_utc,
     load_previous_manifest,
 )
-from simspad.dataset.plan import Plan, RecordingTask, RenderTask, make_plan
+from simspad.dataset.plan import DatasetPlan, RecordingTask, RenderTask, make_plan
 from simspad.dataset.spec import DatasetSpec
 from simspad.dataset.spec_validation import load_spec
 from simspad.dataset.task_queue import Job, TaskQueue
 from simspad.errors import SimSpadError
 from simspad.io.atomic import ensure_writable_dir
 from simspad.io.manifest import recording_is_complete
-from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks
+from simspad.render.render_layout import RenderLayout, chunk_size_for, keyframe_chunks
 from simspad.render.renderer import finalize_render, with_warp_results
-from simspad.render.warp_schedule import anchor_indices
+from simspad.render.warp.schedule import anchor_indices
 
 
 @dataclass
@@ -168,7 +168,7 @@ def _remove_obsolete(out_dir: Path, manifest: ManifestState, log) -> None:
             shutil.rmtree(p, ignore_errors=True)
 
 
-def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorConfig, progress, log):
+def _run(out_dir: Path, plan: DatasetPlan, manifest: ManifestState, executor: ExecutorConfig, progress, log):
     # Which recordings are already there (verified: hash of the spec inputs and sha256 of the bytes)?
     todo, skipped = [], []
     for task in plan.recordings:
@@ -237,7 +237,7 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                                                                 host=res.get("host"),
                                                                 names=tuple(res["plan"]["names"]))
                     existing = set(res.get("existing", ()))
-                    planned = RenderPlan.from_dict(res["plan"])
+                    planned = RenderLayout.from_dict(res["plan"])
                     warp, n_shared = planned.warp, planned.n_shared
                     # A warp render renders its anchors (and a noise probe) first, then synthesizes between them.
                     wanted = (anchor_indices(res["n_keyframes"], warp["stride"]) if warp
@@ -389,7 +389,7 @@ def _finish_render(out_dir: Path, task: RenderTask, state: _ChunkedRender) -> di
     res = {"ok": False, "seconds": state.seconds, "host": state.host, "error": state.error}
     if state.error is None:
         try:
-            render_plan = RenderPlan.from_dict(state.plan)
+            render_plan = RenderLayout.from_dict(state.plan)
             if state.anchors:
                 render_plan = with_warp_results(render_plan, state.warp_chunks)
             finalize_render(render_plan, out_dir / task.rel_dir)

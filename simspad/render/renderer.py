@@ -9,7 +9,7 @@ screen space: radiance (the scene's integrator, ``spp`` samples) and depth (an `
 of everything that determines its pixels, so re-runs re-use frames and an interrupted render resumes
 (:mod:`simspad.render.keyframe_files`); ``timeline.json`` is written last.
 
-A render is three stages (:mod:`simspad.render.render_plan`): :func:`plan_render` (keyframe instants, poses and
+A render is three stages (:mod:`simspad.render.render_layout`): :func:`layout_render` (keyframe instants, poses and
 names), :func:`render_keyframes` (any list of keyframe indices, in any process: ``simspad generate`` spreads
 chunks of them over its workers) with :func:`render_probe` (keyframe 0 again with the next seed: the render-noise
 budget's probe), and :func:`finalize_render` (``timeline.json`` with the budget, once every keyframe exists).
@@ -17,7 +17,7 @@ budget's probe), and :func:`finalize_render` (``timeline.json`` with the budget,
 
 With ``interpolation = "warp"`` (opt-in, :mod:`simspad.render.settings` says why it is not the default) only
 sparse keyframes are rendered; those between are synthesized by reprojection and rendered for real (in blocks or
-whole) only where the warps disagree (:mod:`simspad.render.warp_render`, which also spreads it over processes);
+whole) only where the warps disagree (:mod:`simspad.render.warp.rendering`, which also spreads it over processes);
 ``timeline.json`` marks each keyframe's ``source``.
 """
 
@@ -85,11 +85,12 @@ from simspad.render.mitsuba_scene import (
     MitsubaScene,
     sampler_for,
 )
-from simspad.render.render_plan import RenderPlan
+from simspad.render.render_layout import RenderLayout
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.summary import RenderSummary
-from simspad.render.warp_render import (
+from simspad.render.warp.rendering import (
+    SegmentReport,
     chunk_result,
     merge_chunk_results,
     noise_probe_name,
@@ -98,8 +99,8 @@ from simspad.render.warp_render import (
 )
 from simspad.scenes.library import content_hash, resolve_scene
 
-__all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
-           "load_scene", "plan_render", "render_keyframes", "render_missing_geometry", "render_probe",
+__all__ = ["LoadedScene", "RenderLayout", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
+           "load_scene", "layout_render", "render_keyframes", "render_missing_geometry", "render_probe",
            "render_sequence", "select_variant", "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
@@ -162,9 +163,9 @@ def load_scene(scene, trajectory, width: int, height: int, spp: int, variant: st
     return LoadedScene(info, ts, traj_source, traj_hash, ms, variant, counter)
 
 
-def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | None = None,
+def layout_render(scene, trajectory, settings: RenderSettings, *, variant: str | None = None,
                 spad_bin_s: float | None = None, loaded: LoadedScene | None = None,
-                prefix: RenderPlan | None = None, prefix_time_scale: float = 1.0) -> RenderPlan:
+                prefix: RenderLayout | None = None, prefix_time_scale: float = 1.0) -> RenderLayout:
     """Stage 1: the keyframe instants, poses and file names of a render, and its ``timeline.json`` fields.
 
     Loads the scene (unless ``loaded`` is given), checks the trajectory covers the span, and runs the adaptive
@@ -247,13 +248,13 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     geometry = plan_geometry(ts, ms, t0, t1, settings.gt_rate_hz, base_key)
     if geometry is not None:
         timeline["geometry"] = geometry
-    return RenderPlan(times_s=tuple(float(t) for t in times), names=tuple(names), camera_to_world=tuple(cam_poses),
+    return RenderLayout(times_s=tuple(float(t) for t in times), names=tuple(names), camera_to_world=tuple(cam_poses),
                       width=width, height=height, spp=spp, seed=seed, variant=loaded.variant,
                       scene_hash=base_key["scene"], trajectory_hash=loaded.traj_hash, timeline=timeline,
                       objects_to_world=tuple(objects_to_world), base_key=base_key)
 
 
-def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: int, t0: float, t1: float,
+def _check_prefix(prefix: RenderLayout, width: int, height: int, spp: int, seed: int, t0: float, t1: float,
                   scale: float) -> None:
     """A prefix must be a linear render with this one's pixels-determining settings, starting where it starts."""
     why = None
@@ -267,8 +268,8 @@ def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: i
         raise SimSpadError(f"cannot share keyframes with that render: {why}", field="prefix")
 
 
-def link_shared_keyframes(plan: RenderPlan, indices, prefix_dir, out_dir) -> int:
-    """Hard-link the shared keyframes (:func:`plan_render`'s ``prefix``) among ``indices`` from the prefix's
+def link_shared_keyframes(plan: RenderLayout, indices, prefix_dir, out_dir) -> int:
+    """Hard-link the shared keyframes (:func:`layout_render`'s ``prefix``) among ``indices`` from the prefix's
     render directory ``prefix_dir`` into ``out_dir``; a copy where the file system cannot link. Keyframes whose
     source is missing or damaged are left to :func:`render_keyframes`, which renders the same pixels (same pose,
     seed and settings). Returns how many were linked or copied."""
@@ -293,7 +294,7 @@ def link_shared_keyframes(plan: RenderPlan, indices, prefix_dir, out_dir) -> int
     return n
 
 
-def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, progress: bool = False,
+def render_keyframes(scene, trajectory, plan: RenderLayout, indices, *, out_dir, progress: bool = False,
                      loaded: LoadedScene | None = None, on_frame: Callable[[int], None] | None = None
                      ) -> "RenderedFrames":
     """Stage 2: render the keyframes ``indices`` of ``plan`` whose files are not in ``out_dir`` yet.
@@ -305,9 +306,9 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     Parameters
     ----------
     scene, trajectory
-        As given to :func:`plan_render` (reloaded here unless ``loaded`` is given; their content hashes must
+        As given to :func:`layout_render` (reloaded here unless ``loaded`` is given; their content hashes must
         match the plan's).
-    plan : RenderPlan
+    plan : RenderLayout
     indices : iterable of int
         Keyframe indices into ``plan``.
     out_dir : str or Path
@@ -354,7 +355,7 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     return done
 
 
-def render_missing_geometry(plan: RenderPlan, keyframe_indices, out_dir, loaded: LoadedScene) -> int:
+def render_missing_geometry(plan: RenderLayout, keyframe_indices, out_dir, loaded: LoadedScene) -> int:
     """Render the geometry passes that the keyframes ``keyframe_indices`` own and that ``out_dir`` lacks (warp
     renders, whose keyframes are synthesized rather than rendered by :func:`render_keyframes`)."""
     geometry = plan.timeline.get("geometry")
@@ -363,9 +364,9 @@ def render_missing_geometry(plan: RenderPlan, keyframe_indices, out_dir, loaded:
     return render_geometry(loaded.ms, geometry, todo, Path(out_dir)) if todo else 0
 
 
-def render_probe(scene, trajectory, plan: RenderPlan, *, out_dir, loaded: LoadedScene | None = None) -> bool:
+def render_probe(scene, trajectory, plan: RenderLayout, *, out_dir, loaded: LoadedScene | None = None) -> bool:
     """Stage 2b: the render-noise budget's noise probe (keyframe 0 again with the next seed,
-    :func:`~simspad.render.warp_render.render_noise_probe`) into ``out_dir`` unless it is there; in any process, like
+    :func:`~simspad.render.warp.rendering.render_noise_probe`) into ``out_dir`` unless it is there; in any process, like
     :func:`render_keyframes` (whose arguments these are). True if it was rendered now."""
     out_dir = Path(out_dir)
     if (out_dir / noise_probe_name(plan)).is_file():
@@ -392,7 +393,7 @@ def cache_file_name(base_key: dict) -> str:
     return f"{CACHE_FILE_PREFIX}{frame_key(base_key, -1.0)}.npz"
 
 
-def _converged_renderer(plan: RenderPlan, loaded: LoadedScene, out_dir: Path):
+def _converged_renderer(plan: RenderLayout, loaded: LoadedScene, out_dir: Path):
     """The :class:`ConvergedRenderer` of ``plan`` and its cache: read from the render directory, or built from
     the plan's probe keyframes (the same values in any process) and written there."""
     fields = plan.timeline["renderer"]["convergence"]
@@ -409,7 +410,7 @@ def _converged_renderer(plan: RenderPlan, loaded: LoadedScene, out_dir: Path):
     return cr, cache
 
 
-def finalize_render(plan: RenderPlan, out_dir) -> Path:
+def finalize_render(plan: RenderLayout, out_dir) -> Path:
     """Stage 3: write ``timeline.json`` (which marks the render directory complete) once every keyframe file of
     ``plan`` exists, and delete frames of earlier renders into the same directory that it does not reference.
 
@@ -439,9 +440,9 @@ def finalize_render(plan: RenderPlan, out_dir) -> Path:
     return path
 
 
-def measure_render_noise(plan: RenderPlan, out_dir) -> dict | None:
+def measure_render_noise(plan: RenderLayout, out_dir) -> dict | None:
     """The render-noise budget of a render (``timeline.json``'s ``render_noise``) from keyframe 0's file and its
-    noise probe (:func:`~simspad.render.warp_render.render_noise_probe`: keyframe 0 again with the next seed), or
+    noise probe (:func:`~simspad.render.warp.rendering.render_noise_probe`: keyframe 0 again with the next seed), or
     None where the probe was not rendered (a render made before SimSPAD rendered one for every render).
 
     :func:`simspad.radiance.noise_budget.render_noise_budget` defines the figures; the probe's file and seed are
@@ -456,7 +457,7 @@ def measure_render_noise(plan: RenderPlan, out_dir) -> dict | None:
             "probe_seed": plan.seed + PROBE_SEED_OFFSET, "probe_renders": 1}
 
 
-def _check_same_inputs(plan: RenderPlan, loaded: LoadedScene) -> None:
+def _check_same_inputs(plan: RenderLayout, loaded: LoadedScene) -> None:
     if loaded.variant != plan.variant:
         raise SimSpadError(f"this worker renders with Mitsuba variant {loaded.variant} but the plan was made with "
                            f"{plan.variant}: give every worker the same DRJIT_LIBLLVM_PATH", field="variant")
@@ -473,7 +474,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                     progress: bool = True, variant: str | None = None,
                     spad_bin_s: float | None = None) -> RenderSummary:
     """Render radiance keyframes of ``scene`` along ``trajectory`` into a render directory: the three stages
-    (:func:`plan_render`, :func:`render_keyframes` of every keyframe, :func:`finalize_render`) in this process.
+    (:func:`layout_render`, :func:`render_keyframes` of every keyframe, :func:`finalize_render`) in this process.
 
     Parameters
     ----------
@@ -509,7 +510,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     created = make_out_dir(out_dir)
     try:
         loaded = load_scene(scene, trajectory, width, height, int(settings.spp), variant)
-        plan = plan_render(scene, trajectory, settings, spad_bin_s=spad_bin_s, loaded=loaded)
+        plan = layout_render(scene, trajectory, settings, spad_bin_s=spad_bin_s, loaded=loaded)
     except BaseException:
         remove_created(created)
         raise
@@ -538,8 +539,8 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                          render_noise=render_noise, probe_s=probe_s if plan.warp is None else None)
 
 
-def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progress: bool):
-    """Render sparse keyframes of ``plan`` and synthesize the rest (:mod:`simspad.render.warp_render`); the
+def _render_warped(plan: RenderLayout, loaded: LoadedScene, out_dir: Path, progress: bool):
+    """Render sparse keyframes of ``plan`` and synthesize the rest (:mod:`simspad.render.warp.rendering`); the
     plan comes back with the keyframes' files and sources and the warp schedule in its timeline fields."""
     loaded.counter.take()  # kernels of loading and depth probes belong to no frame
     bar = _progress(plan.n_keyframes, progress)
@@ -550,9 +551,9 @@ def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progres
     return done, with_warp_results(plan, [chunk_result(done, 0, plan.n_keyframes - 1)])
 
 
-def with_warp_results(plan: RenderPlan, chunks: list[dict]) -> RenderPlan:
+def with_warp_results(plan: RenderLayout, chunks: list[SegmentReport]) -> RenderLayout:
     """``plan`` with the keyframe files, sources and ``schedule.warp`` fields that the warp chunks reported
-    (:func:`simspad.render.warp_render.chunk_result`, any order): what :func:`finalize_render` then writes."""
+    (:func:`simspad.render.warp.rendering.chunk_result`, any order): what :func:`finalize_render` then writes."""
     names, sources, warp = merge_chunk_results(plan.n_keyframes, chunks, plan.warp)
     schedule = dict(plan.timeline["schedule"], n_rendered_keyframes=sources.count("render"), warp=warp)
     return dataclasses.replace(plan, names=tuple(names), sources=tuple(sources),

@@ -1,11 +1,11 @@
 """The plan of one render: every keyframe's instant, pose and file name, and what ``timeline.json`` will say.
 
 A render runs in three stages (:mod:`simspad.render.renderer`): *plan* (load the scene once, predict the image
-motion, choose the keyframe instants; :class:`RenderPlan`), *render* any subset of keyframe indices, in any number
+motion, choose the keyframe instants; :class:`RenderLayout`), *render* any subset of keyframe indices, in any number
 of processes or machines, and *finalize* (write ``timeline.json`` once every keyframe file exists). Each keyframe
 is rendered with the same fixed seed and named by a hash of everything that determines its pixels, so its bytes
 do not depend on which chunk, process or order rendered it. A plan is plain data (JSON-serialisable through
-:meth:`RenderPlan.to_dict`), so it travels to workers as a task argument and finalizing needs no Mitsuba.
+:meth:`RenderLayout.to_dict`), so it travels to workers as a task argument and finalizing needs no Mitsuba.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
-class RenderPlan:
+class RenderLayout:
     """Everything the render and finalize stages need, computed once by the plan stage.
 
     Attributes
@@ -93,7 +93,7 @@ class RenderPlan:
                 "sources": list(self.sources), "base_key": self.base_key}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "RenderPlan":
+    def from_dict(cls, d: dict) -> "RenderLayout":
         return cls(times_s=tuple(float(t) for t in d["times_s"]), names=tuple(d["names"]),
                    camera_to_world=tuple(tuple(tuple(float(v) for v in row) for row in pose)
                                          for pose in d["camera_to_world"]),
