@@ -81,10 +81,10 @@ def naive_generate(spec, out: Path) -> float:
     planned = {}
     for r in plan.renders:  # slower speeds first: a faster render's plan starts with its prefix's
         s = r.sequence
-        render_plan = planned[r.rel_dir] = render_layout_of(r, planned)
-        render_keyframes(s.scene, sequence_trajectories(s.scene, s.trajectory, r.speed_factor), render_plan,
-                         range(render_plan.n_keyframes), out_dir=out / r.rel_dir)
-        finalize_render(render_plan, out / r.rel_dir)
+        layout = planned[r.rel_dir] = render_layout_of(r, planned)
+        render_keyframes(s.scene, sequence_trajectories(s.scene, s.trajectory, r.speed_factor), layout,
+                         range(layout.n_keyframes), out_dir=out / r.rel_dir)
+        finalize_render(layout, out / r.rel_dir)
     for t in plan.recordings:
         settings = RecordingSettings(lux=t.lux, sensors=dict(t.sensors), start_s=t.start_s, duration_s=t.duration_s,
                                      seed=t.seed, stream_key=t.stream_key, gt_rate_hz=t.gt_rate_hz, optics=t.optics)
