@@ -7,11 +7,11 @@ The work is a small dependency graph of typed jobs (:mod:`simspad.dataset.jobs`)
 sensors) into ``<out>/renders/<sequence>[_x<k>]-<hash>/`` — a layout job, then chunks of keyframes and the noise
 probe spread over every worker (and a warp render's synthesis jobs), then ``timeline.json`` written here once
 every job is back, each render's phases kept by a :class:`~simspad.dataset.render_job.RenderJob` — then one
-simulation per (sequence, speed, lux) into ``<out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5``, which also states the image motion
-measured on its render (:mod:`simspad.render.image_motion`). Keyframes are written under their final names (each
-atomically), so a killed run's keyframes are kept and the next run renders only the missing ones. The driver (this
-module, in the calling process, with :mod:`~simspad.dataset.manifest_state`) is the only writer of
-``manifest.json``, which it rewrites atomically as results arrive.
+simulation per (sequence, speed, lux) into ``<out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5``, which
+also states the image motion measured on its render (:mod:`simspad.render.image_motion`). Keyframes are written
+under their final names (each atomically), so a killed run's keyframes are kept and the next run renders only the
+missing ones. The driver (this module, in the calling process, with :mod:`~simspad.dataset.manifest_state`) is the
+only writer of ``manifest.json``, which it rewrites atomically as results arrive.
 
 Determinism: every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key
 ``(sequence, lux)``), every render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same

@@ -32,8 +32,9 @@ def _layout(n: int, warp_stride: int | None = None) -> RenderLayout:
     if warp_stride:
         schedule["warp"] = {"stride": warp_stride, "threshold": 2.0, "emission_layer": False}
     eye = tuple(tuple(float(i == j) for j in range(4)) for i in range(4))
-    return RenderLayout(times_s=tuple(0.001 * i for i in range(n)), names=tuple(f"frames/{i:06d}.exr" for i in range(n)),
-                        camera_to_world=(eye,) * n, width=8, height=6, spp=1, seed=7, variant="scalar_rgb",
+    return RenderLayout(times_s=tuple(0.001 * i for i in range(n)),
+                        names=tuple(f"frames/{i:06d}.exr" for i in range(n)), camera_to_world=(eye,) * n, width=8,
+                        height=6, spp=1, seed=7, variant="scalar_rgb",
                         scene_hash="s", trajectory_hash="t", timeline={"schedule": schedule})
 
 
@@ -94,8 +95,8 @@ def test_warp_render_synthesizes_between_anchors_after_they_and_the_probe_are_ba
 
 def test_a_faster_render_waits_for_its_shared_keyframes(tmp_path):
     task, render, bar = _render(tmp_path)
-    layout = RenderLayout(**{**_layout(8).__dict__,
-                             "timeline": {"schedule": {"interpolation": "linear", "shared_keyframes": {"n_keyframes": 3}}}})
+    schedule = {"interpolation": "linear", "shared_keyframes": {"n_keyframes": 3}}
+    layout = RenderLayout(**{**_layout(8).__dict__, "timeline": {"schedule": schedule}})
     slower = RenderTask(sequence=task.sequence, render_hash="g" * 16, rel_dir="renders/seq-g", seed=7)
     render.task = RenderTask(**{**task.__dict__, "prefix": slower})
     jobs = render.on_result(LayoutJob(render.task), LayoutResult(layout=layout), prefix_pending=True)

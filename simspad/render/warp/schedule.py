@@ -29,9 +29,9 @@ from simspad.render.warp.synthesis import Disagreement, WarpSource, prepare, syn
 
 #: Rendered keyframes are at most this many keyframes of the linear schedule apart.
 WARP_STRIDE = 16
-#: Largest disagreement score of a synthesized keyframe (:meth:`simspad.render.warp.synthesis.Disagreement.score`): the worst
-#: tile's RMS difference of the two warps in units of what two renders' Monte Carlo noise alone would give (≈ 1
-#: where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
+#: Largest disagreement score of a synthesized keyframe (:meth:`simspad.render.warp.synthesis.Disagreement.score`):
+#: the worst tile's RMS difference of the two warps in units of what two renders' Monte Carlo noise alone would give
+#: (≈ 1 where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
 #: mid-way blend errs by s/√2: a ratio ≤ 2 keeps the blend's error within about √2 × a render's own noise.
 WARP_THRESHOLD = 2.0
 #: Largest cost (as a fraction of a whole render) of the blocks rendered into each keyframe of a segment whose
@@ -273,5 +273,6 @@ def describe_patches(patched: dict) -> dict:
 
 
 __all__ = ["PATCH_MAX_FRACTION", "PATCH_MAX_RENDERS", "SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE",
-           "WARP_THRESHOLD", "Disagreement", "KeyframeSource", "Patcher", "SynthesisReport", "anchor_indices", "describe_disagreement",
+           "WARP_THRESHOLD", "Disagreement", "KeyframeSource", "Patcher", "SynthesisReport", "anchor_indices",
+           "describe_disagreement",
            "describe_patches", "describe_scores", "synthesize_keyframes"]
