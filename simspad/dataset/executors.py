@@ -90,6 +90,22 @@ def _apply_environment(env: dict[str, str]) -> None:
         os.environ.setdefault(key, value)
 
 
+def run_job(job: Job, out_dir: str, env: dict[str, str], threads: int | None = None) -> JobResult:
+    """Run ``job`` in this (worker) process with its kind's function; ``threads``: Dr.Jit threads of a render job
+    (None: the Dask worker's own thread count, else every core). Never raises."""
+    if isinstance(job, LayoutJob):
+        return run_render_layout(job.task, out_dir, env)
+    if isinstance(job, ChunkJob):
+        return run_render_chunk(job.task, job.layout, job.indices, out_dir, env, threads)
+    if isinstance(job, ProbeJob):
+        return run_noise_probe(job.task, job.layout, out_dir, env, threads)
+    if isinstance(job, WarpJob):
+        return run_warp_chunk(job.task, job.layout, job.anchors, out_dir, env, threads)
+    if isinstance(job, SimulationJob):
+        return run_simulation(job.task, out_dir, env)
+    return JobFailure(error=f"unknown job {type(job).__name__}")
+
+
 def _error_result(exc: BaseException, t0: float) -> JobFailure:
     if isinstance(exc, SimSpadError):
         message = exc.format().replace("\n", "; ")
@@ -275,22 +291,6 @@ def _motion_measurement(render_dir: Path, task, measured: dict):
         measured.update(motion_attrs(motion, task.speed_factor))
         return measured
     return attrs
-
-
-def run_job(job: Job, out_dir: str, env: dict[str, str], threads: int | None = None) -> JobResult:
-    """Run ``job`` in this (worker) process with its kind's function; ``threads``: Dr.Jit threads of a render job
-    (None: the Dask worker's own thread count, else every core). Never raises."""
-    if isinstance(job, LayoutJob):
-        return run_render_layout(job.task, out_dir, env)
-    if isinstance(job, ChunkJob):
-        return run_render_chunk(job.task, job.layout, job.indices, out_dir, env, threads)
-    if isinstance(job, ProbeJob):
-        return run_noise_probe(job.task, job.layout, out_dir, env, threads)
-    if isinstance(job, WarpJob):
-        return run_warp_chunk(job.task, job.layout, job.anchors, out_dir, env, threads)
-    if isinstance(job, SimulationJob):
-        return run_simulation(job.task, out_dir, env)
-    return JobFailure(error=f"unknown job {type(job).__name__}")
 
 
 def default_workers() -> int:
