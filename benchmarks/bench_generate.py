@@ -70,7 +70,7 @@ def naive_generate(spec, out: Path) -> float:
     byte for byte by :func:`same_keyframes`)."""
     for k, v in job_environment().items():
         os.environ.setdefault(k, v)
-    from simspad.dataset.executors import plan_render_task
+    from simspad.dataset.executors import render_layout_of
     from simspad.dataset.speed import sequence_trajectories
     from simspad.render.renderer import finalize_render, render_keyframes, select_variant
     from simspad.sensors.simulate import RecordingSettings, simulate_recording
@@ -81,10 +81,10 @@ def naive_generate(spec, out: Path) -> float:
     planned = {}
     for r in plan.renders:  # slower speeds first: a faster render's plan starts with its prefix's
         s = r.sequence
-        render_plan = planned[r.rel_dir] = plan_render_task(r, planned)
-        render_keyframes(s.scene, sequence_trajectories(s.scene, s.trajectory, r.speed_factor), render_plan,
-                         range(render_plan.n_keyframes), out_dir=out / r.rel_dir)
-        finalize_render(render_plan, out / r.rel_dir)
+        layout = planned[r.rel_dir] = render_layout_of(r, planned)
+        render_keyframes(s.scene, sequence_trajectories(s.scene, s.trajectory, r.speed_factor), layout,
+                         range(layout.n_keyframes), out_dir=out / r.rel_dir)
+        finalize_render(layout, out / r.rel_dir)
     for t in plan.recordings:
         settings = RecordingSettings(lux=t.lux, sensors=dict(t.sensors), start_s=t.start_s, duration_s=t.duration_s,
                                      seed=t.seed, stream_key=t.stream_key, gt_rate_hz=t.gt_rate_hz, optics=t.optics)

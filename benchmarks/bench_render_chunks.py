@@ -30,36 +30,37 @@ sys.path.insert(0, str(REPO))
 from simspad.dataset.executors import LocalExecutor, job_environment  # noqa: E402
 from simspad.dataset.plan import RenderTask  # noqa: E402
 from simspad.dataset.spec import SequenceSpec  # noqa: E402
-from simspad.dataset.task_queue import Job, TaskQueue  # noqa: E402
+from simspad.dataset.jobs import ChunkJob, ChunkResult, JobFailure, LayoutJob, LayoutResult  # noqa: E402
+from simspad.dataset.task_queue import TaskQueue  # noqa: E402
+from simspad.render.render_layout import chunk_size_for, keyframe_chunks  # noqa: E402
 from simspad.processes import available_cores  # noqa: E402
-from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks  # noqa: E402
 from simspad.render.renderer import finalize_render  # noqa: E402
 from simspad.render.settings import RenderSettings  # noqa: E402
 
 
 def render_with(task, out: Path, workers: int) -> tuple[float, int, float, float]:
-    """Plan once, render every keyframe in chunks on ``workers`` processes, finalize: wall seconds, keyframes,
+    """Lay out once, render every keyframe in chunks on ``workers`` processes, finalize: wall seconds, keyframes,
     total CPU seconds of the chunks, and the CPU seconds of the busiest worker process (the critical path)."""
     per_pid: dict[int, float] = {}
     ex = LocalExecutor(out, job_environment(), workers)
     try:
         queue = TaskQueue(ex, print)
         t0 = time.perf_counter()
-        queue.add(Job("plan", None, lambda: ex.submit_render_plan(task)))
-        plan = None
+        queue.add(LayoutJob(task))
+        layout = None
         while queue.busy:
             for job, res in queue.finished():
-                if not res.get("ok"):
-                    raise SystemExit(f"{job.kind} failed: {res.get('error')}")
-                if job.kind == "chunk":
-                    per_pid[res["pid"]] = per_pid.get(res["pid"], 0.0) + res["cpu_s"]
-                if job.kind == "plan":
-                    plan = res["plan"]
-                    todo = [i for i in range(res["n_keyframes"]) if i not in set(res["existing"])]
+                if isinstance(res, JobFailure):
+                    raise SystemExit(f"{job.label} failed: {res.error}")
+                if isinstance(res, ChunkResult):
+                    per_pid[res.pid] = per_pid.get(res.pid, 0.0) + res.cpu_s
+                if isinstance(res, LayoutResult):
+                    layout = res.layout
+                    todo = [i for i in range(res.n_keyframes) if i not in set(res.existing)]
                     for c in keyframe_chunks(todo, chunk_size_for(len(todo), workers)):
-                        queue.add(Job("chunk", c, lambda c=c: ex.submit_render_chunk(task, plan, c)))
-        finalize_render(RenderPlan.from_dict(plan), out / task.rel_dir)
-        return time.perf_counter() - t0, len(plan["names"]), sum(per_pid.values()), max(per_pid.values())
+                        queue.add(ChunkJob(task, layout, tuple(c)))
+        finalize_render(layout, out / task.rel_dir)
+        return time.perf_counter() - t0, len(layout.names), sum(per_pid.values()), max(per_pid.values())
     finally:
         ex.close()
 

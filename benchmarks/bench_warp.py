@@ -58,7 +58,7 @@ HERE = Path(__file__).resolve().parent
 LUX = 1000.0
 #: Event camera with its own noise sources off: only radiance changes make events.
 QUIET_EVENTS = replace(EventParams(), shot_noise_rate_hz_at_1lux=0.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0)
-NOISE_PROBE_RENDERS = 1  # render_noise_probe() in render/warp_render.py (keyframe 0 again, next seed), every render
+NOISE_PROBE_RENDERS = 1  # render_noise_probe() in render/warp/rendering.py (keyframe 0 again, next seed), every render
 
 
 def converged(scene, ts, instants, res, spp) -> dict[float, np.ndarray]:

@@ -3,7 +3,7 @@
 Nothing here is a constant of this package: every figure is a measured unit cost on this machine scaled by the
 spec's sizes.
 
-- **Keyframes** are exact: each sequence's render is planned at its full size (:func:`plan_render`: the adaptive
+- **Keyframes** are exact: each sequence's render is planned at its full size (:func:`layout_render`: the adaptive
   schedule from the predicted image motion), which writes nothing.
 - **Render time** per keyframe: a calibration render of a few keyframes of each scene along its own trajectory,
   on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
@@ -43,7 +43,7 @@ from simspad.dataset.directory import recording_rel_path
 from simspad.dataset.executors import (
     default_workers,
     job_environment,
-    plan_render_task,
+    render_layout_of,
 )
 from simspad.dataset.plan import make_plan
 from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write_exr
@@ -52,10 +52,10 @@ from simspad.io.recording import open_recording
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
 from simspad.render.mitsuba_env import CUDA_VARIANT, cuda_device_name, select_variant
-from simspad.render.render_plan import chunk_size_for
+from simspad.render.render_layout import chunk_size_for
 from simspad.render.renderer import (
     load_scene,
-    plan_render,
+    layout_render,
     render_keyframes,
     render_sequence,
 )
@@ -189,7 +189,7 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None) -> SceneRenderCost:
     points, exr, rss = [], [], []
     for spp in CALIBRATION_SPP:
         loaded.ms.spp = spp  # mi.render takes the sample count per call; same scene, same film
-        plan = plan_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp), loaded=loaded)
+        plan = layout_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp), loaded=loaded)
         picks = sorted({int(round(i)) for i in np.linspace(0, plan.n_keyframes - 1, CALIBRATION_KEYFRAMES + 1)})
         out = tmp / f"cal-{spp}"
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
@@ -403,7 +403,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         seq = r.sequence
         # Retimed (a render at speed ×k plays its trajectory k times faster); keyframes shared with the slower
         # render are linked, not rendered, and take no disk.
-        rp = planned[r.rel_dir] = plan_render_task(r, planned)
+        rp = planned[r.rel_dir] = render_layout_of(r, planned)
         n = rp.n_keyframes - rp.n_shared
         n_shared += rp.n_shared
         cost = costs.render[resolve_scene(seq.scene).name]

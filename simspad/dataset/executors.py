@@ -1,15 +1,17 @@
-"""Where dataset work runs: worker-side task functions and the ``local`` and ``dask`` executors.
+"""Where dataset work runs: worker-side job functions and the ``local`` and ``dask`` executors.
 
-Task functions (:func:`run_render_plan`, :func:`run_render_chunk`, :func:`run_simulation`) run inside a worker process (a local pool process or
-a Dask worker, possibly on another machine). They take plain picklable task descriptions, apply the job's
-environment (``DRJIT_LIBLLVM_PATH``) before Mitsuba is imported, choose the Mitsuba variant inside the worker,
-write their output atomically, and never raise: they return a dict with ``ok`` and either results or a one-line
-``error``, so an exception that does not pickle cannot hang the job.
+:func:`run_job` runs one job of :mod:`simspad.dataset.jobs` inside a worker process (a local pool process or a
+Dask worker, possibly on another machine) through the job kind's function (:func:`run_render_layout`,
+:func:`run_render_chunk`, :func:`run_noise_probe`, :func:`run_warp_chunk`, :func:`run_simulation`). Each
+applies the job's environment (``DRJIT_LIBLLVM_PATH``) before Mitsuba is imported, chooses the Mitsuba variant
+inside the worker, writes its output atomically, and never raises: it returns its kind's result dataclass, or a
+:class:`~simspad.dataset.jobs.JobFailure` with a one-line ``error``, so an exception that does not pickle cannot
+hang the job.
 
-Executors expose one small interface used by :mod:`simspad.dataset.generate`:
-``submit_render_plan(task)``, ``submit_render_chunk(task, plan, indices)``, ``submit_noise_probe(task, plan)`` and
-``submit_warp_chunk(task, plan, anchors)`` (a warp render's second phase), ``submit_simulation(task)``,
-``wait(futures) -> done``, ``result(future)``, ``slots()`` (how many tasks may run at once) and ``close()``.
+Executors expose one small interface used by the driver (:mod:`simspad.dataset.generate`, through
+:class:`~simspad.dataset.task_queue.TaskQueue`): ``submit(job) -> future``, ``wait(futures) -> done``,
+``result(future) -> JobResult`` (a :class:`~simspad.dataset.jobs.JobFailure` with ``died=True`` where the worker
+process died), ``slots()`` (how many jobs may run at once), ``workers``, ``describe()`` and ``close()``.
 """
 
 from __future__ import annotations
@@ -26,12 +28,27 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from tqdm import tqdm
 
 from simspad import defaults
 from simspad.dataset.fault_injection import maybe_inject_fault
+from simspad.dataset.jobs import (
+    RENDER_JOBS,
+    ChunkJob,
+    ChunkResult,
+    Job,
+    JobFailure,
+    JobResult,
+    LayoutJob,
+    LayoutResult,
+    ProbeJob,
+    ProbeResult,
+    SimulationJob,
+    SimulationResult,
+    WarpJob,
+    WarpResult,
+)
 from simspad.dataset.speed import sequence_trajectories
 from simspad.errors import SimSpadError
 from simspad.io.hashing import file_sha256
@@ -39,17 +56,17 @@ from simspad.processes import available_cores, die_with_parent_and_ignore_sigint
 from simspad.render.image_motion import measure_image_motion, motion_attrs
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import select_variant
-from simspad.render.render_plan import RenderPlan
+from simspad.render.render_layout import RenderLayout
 from simspad.render.geometry import missing_geometry, owned_instants
 from simspad.render.renderer import (
     link_shared_keyframes,
     load_scene,
-    plan_render,
+    layout_render,
     render_keyframes,
     render_missing_geometry,
 )
 from simspad.render.settings import RenderSettings
-from simspad.render.warp_render import chunk_result, render_noise_probe, render_with_warps
+from simspad.render.warp.rendering import chunk_result, render_noise_probe, render_with_warps
 from simspad.sensors.presets import SpadParams
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
@@ -72,13 +89,29 @@ def _apply_environment(env: dict[str, str]) -> None:
         os.environ.setdefault(key, value)
 
 
-def _error_result(exc: BaseException, t0: float) -> dict[str, Any]:
+def run_job(job: Job, out_dir: str, env: dict[str, str], threads: int | None = None) -> JobResult:
+    """Run ``job`` in this (worker) process with its kind's function; ``threads``: Dr.Jit threads of a render job
+    (None: the Dask worker's own thread count, else every core). Never raises."""
+    if isinstance(job, LayoutJob):
+        return run_render_layout(job.task, out_dir, env)
+    if isinstance(job, ChunkJob):
+        return run_render_chunk(job.task, job.layout, job.indices, out_dir, env, threads)
+    if isinstance(job, ProbeJob):
+        return run_noise_probe(job.task, job.layout, out_dir, env, threads)
+    if isinstance(job, WarpJob):
+        return run_warp_chunk(job.task, job.layout, job.anchors, out_dir, env, threads)
+    if isinstance(job, SimulationJob):
+        return run_simulation(job.task, out_dir, env)
+    return JobFailure(error=f"unknown job {type(job).__name__}")
+
+
+def _error_result(exc: BaseException, t0: float) -> JobFailure:
     if isinstance(exc, SimSpadError):
         message = exc.format().replace("\n", "; ")
     else:
         message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-    return {"ok": False, "error": message, "traceback": traceback.format_exc(), "seconds": time.perf_counter() - t0,
-            "host": socket.gethostname()}
+    return JobFailure(error=message, traceback=traceback.format_exc(), seconds=time.perf_counter() - t0,
+                      host=socket.gethostname())
 
 
 def render_settings_of(task) -> RenderSettings:
@@ -102,16 +135,10 @@ def _set_render_threads(threads: int | None) -> None:
         dr.set_thread_count(max(1, int(threads)))
 
 
-def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
-    """Plan the render of one sequence (stage 1, :func:`~simspad.render.renderer.plan_render`) and create its
-    directory under ``<out_dir>/<task.rel_dir>``; keyframes already there (a killed run's) are kept and counted.
-
-    Returns
-    -------
-    dict
-        ``ok``, ``plan`` (:meth:`RenderPlan.to_dict`), ``n_keyframes``, ``existing`` (indices whose file is
-        already there), ``seconds``, ``host``; or ``ok=False`` and ``error``.
-    """
+def run_render_layout(task, out_dir: str, env: dict[str, str]) -> LayoutResult | JobFailure:
+    """Lay out the render of one sequence (stage 1, :func:`~simspad.render.renderer.layout_render`) and create its
+    directory under ``<out_dir>/<task.rel_dir>``; keyframes already there (a killed run's) are kept and counted
+    (:class:`~simspad.dataset.jobs.LayoutResult` ``existing``)."""
     t0 = time.perf_counter()
     try:
         _apply_environment(env)
@@ -119,55 +146,49 @@ def run_render_plan(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         # worker, never inherit it.
         select_variant()
         final = Path(out_dir) / task.rel_dir
-        plan = plan_render_task(task)
+        layout = render_layout_of(task)
         make_out_dir(final)
-        existing = [i for i, name in enumerate(plan.names) if (final / name).is_file()]
-        return {"ok": True, "plan": plan.to_dict(), "n_keyframes": plan.n_keyframes, "existing": existing,
-                "seconds": time.perf_counter() - t0, "host": socket.gethostname()}
+        existing = tuple(i for i, name in enumerate(layout.names) if (final / name).is_file())
+        return LayoutResult(layout=layout, existing=existing, seconds=time.perf_counter() - t0,
+                            host=socket.gethostname())
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
 
 
-def plan_render_task(task, planned: dict | None = None) -> RenderPlan:
-    """The keyframe plan of a render task: its sequence's trajectory retimed by the task's speed factor, its first
-    keyframes those of its prefix (the next slower speed's render) when it has one (taken from ``planned``, plans
-    by render directory, when it is there)."""
+def render_layout_of(task, laid_out: dict | None = None) -> RenderLayout:
+    """The keyframe layout of a render task: its sequence's trajectory retimed by the task's speed factor, its first
+    keyframes those of its prefix (the next slower speed's render) when it has one (taken from ``laid_out``,
+    layouts by render directory, when it is there)."""
     seq = task.sequence
     trajectory = sequence_trajectories(seq.scene, seq.trajectory, task.speed_factor)
     prefix = None
     if task.prefix is not None:
-        prefix = (planned or {}).get(task.prefix.rel_dir) or plan_render_task(task.prefix, planned)
+        prefix = (laid_out or {}).get(task.prefix.rel_dir) or render_layout_of(task.prefix, laid_out)
     scale = 1.0 if task.prefix is None else task.prefix.speed_factor / task.speed_factor
-    return plan_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s,
+    return layout_render(seq.scene, trajectory, render_settings_of(task), spad_bin_s=SpadParams().bin_s,
                        prefix=prefix, prefix_time_scale=scale)
 
 
 #: The scene this worker process loaded last: the next chunk of the same render skips the reload (a keyframe's
-#: pixels depend only on its pose and the plan's seed, not on what this process rendered before).
+#: pixels depend only on its pose and the layout's seed, not on what this process rendered before).
 _SCENE_CACHE: dict = {}
 
 
-def _cached_scene(seq, speed_factor: float, plan: RenderPlan):
-    key = (repr(seq.scene), repr(seq.trajectory), float(speed_factor), plan.width, plan.height, plan.spp,
-           plan.variant, plan.scene_hash, plan.trajectory_hash)
+def _cached_scene(seq, speed_factor: float, layout: RenderLayout):
+    key = (repr(seq.scene), repr(seq.trajectory), float(speed_factor), layout.width, layout.height, layout.spp,
+           layout.variant, layout.scene_hash, layout.trajectory_hash)
     if key not in _SCENE_CACHE:
         _SCENE_CACHE.clear()
         trajectory = sequence_trajectories(seq.scene, seq.trajectory, speed_factor)
-        _SCENE_CACHE[key] = load_scene(seq.scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
+        _SCENE_CACHE[key] = load_scene(seq.scene, trajectory, layout.width, layout.height, layout.spp,
+                                       layout.variant)
     return _SCENE_CACHE[key]
 
 
-def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: dict[str, str],
-                     threads: int | None = None) -> dict[str, Any]:
-    """Render the keyframes ``indices`` of a planned render (stage 2) into ``<out_dir>/<task.rel_dir>``, each
-    written atomically under its final name, so a killed run keeps every keyframe it finished.
-
-    Returns
-    -------
-    dict
-        ``ok``, ``n_rendered``, ``n_reused``, ``seconds`` (wall), ``cpu_s`` (CPU time of this process, all
-        threads), ``pid``, ``host``; or ``ok=False`` and ``error``.
-    """
+def run_render_chunk(task, layout: RenderLayout, indices: tuple[int, ...], out_dir: str, env: dict[str, str],
+                     threads: int | None = None) -> ChunkResult | JobFailure:
+    """Render the keyframes ``indices`` of a laid-out render (stage 2) into ``<out_dir>/<task.rel_dir>``, each
+    written atomically under its final name, so a killed run keeps every keyframe it finished."""
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         _apply_environment(env)
@@ -175,92 +196,71 @@ def run_render_chunk(task, plan: dict, indices: list[int], out_dir: str, env: di
         select_variant()
         _set_render_threads(threads)
         seq = task.sequence
-        render_plan = RenderPlan.from_dict(plan)
         final = Path(out_dir) / task.rel_dir
-        n_linked = 0 if task.prefix is None else link_shared_keyframes(render_plan, indices,
+        n_linked = 0 if task.prefix is None else link_shared_keyframes(layout, indices,
                                                                        Path(out_dir) / task.prefix.rel_dir, final)
         n_rendered, n_reused = 0, n_linked
-        geometry = render_plan.timeline.get("geometry")
-        geometry_todo = missing_geometry(geometry, owned_instants(render_plan.times_s, geometry, indices), final,
-                                         render_plan.width, render_plan.height)
+        geometry = layout.timeline.get("geometry")
+        geometry_todo = missing_geometry(geometry, owned_instants(layout.times_s, geometry, indices), final,
+                                         layout.width, layout.height)
         if n_linked < len(indices) or geometry_todo:  # else nothing left to render: no scene to load
-            done = render_keyframes(seq.scene, None, render_plan, indices, out_dir=final,
-                                    loaded=_cached_scene(seq, task.speed_factor, render_plan))
+            done = render_keyframes(seq.scene, None, layout, indices, out_dir=final,
+                                    loaded=_cached_scene(seq, task.speed_factor, layout))
             n_rendered, n_reused = len(done.frame_times_s), done.n_reused
-        return {"ok": True, "n_rendered": n_rendered, "n_reused": n_reused,
-                "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "pid": os.getpid(),
-                "host": socket.gethostname()}
+        return ChunkResult(n_rendered=n_rendered, n_reused=n_reused, seconds=time.perf_counter() - t0,
+                           cpu_s=time.process_time() - cpu0, pid=os.getpid(), host=socket.gethostname())
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
 
 
-def _warp_worker(task, plan: dict, env: dict[str, str], threads: int | None):
-    """A worker's set-up for a warp render's tasks: environment, variant, render threads; the plan and the scene
+def _warp_worker(task, layout: RenderLayout, env: dict[str, str], threads: int | None):
+    """A worker's set-up for a render's probe and warp jobs: environment, variant, render threads; the scene
     (this process's cached one when it rendered the same sequence before)."""
     _apply_environment(env)
     select_variant()
     _set_render_threads(threads)
-    render_plan = RenderPlan.from_dict(plan)
-    return render_plan, _cached_scene(task.sequence, task.speed_factor, render_plan)
+    return _cached_scene(task.sequence, task.speed_factor, layout)
 
 
-def run_noise_probe(task, plan: dict, out_dir: str, env: dict[str, str], threads: int | None = None) -> dict[str, Any]:
-    """Render the noise probe of a planned render (:func:`~simspad.render.warp_render.render_noise_probe`: keyframe 0
-    again with the next seed; the warp schedule's noise reference and every render's noise budget) into
-    ``<out_dir>/<task.rel_dir>``, unless it is there.
-
-    Returns
-    -------
-    dict
-        ``ok``, ``n_rendered`` (0 or 1), ``seconds``, ``cpu_s``, ``host``; or ``ok=False`` and ``error``.
-    """
+def run_noise_probe(task, layout: RenderLayout, out_dir: str, env: dict[str, str],
+                    threads: int | None = None) -> ProbeResult | JobFailure:
+    """Render the noise probe of a laid-out render (:func:`~simspad.render.warp.rendering.render_noise_probe`:
+    keyframe 0 again with the next seed; the warp schedule's noise reference and every render's noise budget) into
+    ``<out_dir>/<task.rel_dir>``, unless it is there."""
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        render_plan, loaded = _warp_worker(task, plan, env, threads)
-        new = render_noise_probe(loaded.ms, loaded.ts, render_plan, Path(out_dir) / task.rel_dir)
-        return {"ok": True, "n_rendered": int(new), "seconds": time.perf_counter() - t0,
-                "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}
+        loaded = _warp_worker(task, layout, env, threads)
+        new = render_noise_probe(loaded.ms, loaded.ts, layout, Path(out_dir) / task.rel_dir)
+        return ProbeResult(n_rendered=int(new), seconds=time.perf_counter() - t0, cpu_s=time.process_time() - cpu0,
+                           host=socket.gethostname())
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
 
 
-def run_warp_chunk(task, plan: dict, anchors: list[int], out_dir: str, env: dict[str, str],
-                   threads: int | None = None) -> dict[str, Any]:
-    """Synthesize the keyframes between consecutive ``anchors`` of a planned warp render (their files and the
+def run_warp_chunk(task, layout: RenderLayout, anchors: tuple[int, ...], out_dir: str, env: dict[str, str],
+                   threads: int | None = None) -> WarpResult | JobFailure:
+    """Synthesize the keyframes between consecutive ``anchors`` of a laid-out warp render (their files and the
     noise probe already there), rendering for real where the warps disagree
-    (:func:`~simspad.render.warp_render.render_with_warps`).
-
-    Returns
-    -------
-    dict
-        ``ok``, ``warp`` (:func:`~simspad.render.warp_render.chunk_result`), ``n_rendered``, ``seconds``, ``cpu_s``,
-        ``host``; or ``ok=False`` and ``error``.
-    """
+    (:func:`~simspad.render.warp.rendering.render_with_warps`)."""
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         maybe_inject_fault(f"warp:{task.sequence.name}:{anchors[0]}")
-        render_plan, loaded = _warp_worker(task, plan, env, threads)
+        loaded = _warp_worker(task, layout, env, threads)
         # the driver counts the keyframes of finished chunks: no bar here
-        done = render_with_warps(loaded.ms, loaded.ts, render_plan, Path(out_dir) / task.rel_dir, loaded.counter,
+        done = render_with_warps(loaded.ms, loaded.ts, layout, Path(out_dir) / task.rel_dir, loaded.counter,
                                  tqdm(disable=True), anchors=list(anchors))
         # The geometry passes these keyframes own (the last keyframe's only in the chunk that ends there).
-        owners = range(anchors[0], anchors[-1] + (anchors[-1] == render_plan.n_keyframes - 1))
-        render_missing_geometry(render_plan, owners, Path(out_dir) / task.rel_dir, loaded)
-        return {"ok": True, "warp": chunk_result(done, anchors[0], anchors[-1]),
-                "n_rendered": len(done.frame_times_s), "seconds": time.perf_counter() - t0,
-                "cpu_s": time.process_time() - cpu0, "host": socket.gethostname()}
+        owners = range(anchors[0], anchors[-1] + (anchors[-1] == layout.n_keyframes - 1))
+        render_missing_geometry(layout, owners, Path(out_dir) / task.rel_dir, loaded)
+        return WarpResult(segment=chunk_result(done, anchors[0], anchors[-1]), n_rendered=len(done.frame_times_s),
+                          seconds=time.perf_counter() - t0, cpu_s=time.process_time() - cpu0,
+                          host=socket.gethostname())
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed
         return _error_result(exc, t0)
 
 
-def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
-    """Simulate one (sequence, lux) recording and hash it (in the worker, so hashing runs in parallel).
-
-    Returns
-    -------
-    dict
-        ``ok``, ``seconds``, ``size`` (bytes), ``sha256``, ``host``; or ``ok=False`` and ``error``.
-    """
+def run_simulation(task, out_dir: str, env: dict[str, str]) -> SimulationResult | JobFailure:
+    """Simulate one (sequence, lux) recording and hash it (in the worker, so hashing runs in parallel)."""
     t0 = time.perf_counter()
     try:
         _apply_environment(env)
@@ -274,8 +274,8 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> dict[str, Any]:
         simulate_recording(render_dir, out_path, settings, metadata=dict(task.metadata), progress=False,
                            motion_attrs=_motion_measurement(render_dir, task, measured))
         seconds = time.perf_counter() - t0
-        return {"ok": True, "seconds": seconds, "size": out_path.stat().st_size, "sha256": file_sha256(out_path),
-                "host": socket.gethostname(), "motion": measured}
+        return SimulationResult(seconds=seconds, size=out_path.stat().st_size, sha256=file_sha256(out_path),
+                                host=socket.gethostname(), motion=measured)
     except BaseException as exc:  # noqa: BLE001
         return _error_result(exc, t0)
 
@@ -336,28 +336,12 @@ class LocalExecutor:
         """Tasks that may run at once (renders and simulations together)."""
         return self.workers
 
-    def submit_render_plan(self, task):
+    def submit(self, job: Job):
+        """Run ``job`` in the render pool (Mitsuba stays loaded between a render's jobs) or the simulation pool."""
+        render = isinstance(job, RENDER_JOBS)
+        threads = self.render_threads if render else None
         with sigint_blocked():  # a worker spawned here starts deaf to Ctrl-C (no traceback from its imports)
-            return self._pool("render").submit(run_render_plan, task, self.out_dir, self.env)
-
-    def submit_render_chunk(self, task, plan: dict, indices: list[int]):
-        with sigint_blocked():
-            return self._pool("render").submit(run_render_chunk, task, plan, indices, self.out_dir, self.env,
-                                               self.render_threads)
-
-    def submit_noise_probe(self, task, plan: dict):
-        with sigint_blocked():
-            return self._pool("render").submit(run_noise_probe, task, plan, self.out_dir, self.env,
-                                               self.render_threads)
-
-    def submit_warp_chunk(self, task, plan: dict, anchors: list[int]):
-        with sigint_blocked():
-            return self._pool("render").submit(run_warp_chunk, task, plan, anchors, self.out_dir, self.env,
-                                               self.render_threads)
-
-    def submit_simulation(self, task):
-        with sigint_blocked():
-            return self._pool("sim").submit(run_simulation, task, self.out_dir, self.env)
+            return self._pool("render" if render else "sim").submit(run_job, job, self.out_dir, self.env, threads)
 
     @staticmethod
     def wait(futures):
@@ -365,12 +349,11 @@ class LocalExecutor:
         return done
 
     @staticmethod
-    def result(future) -> dict[str, Any]:
+    def result(future) -> JobResult:
         try:
             return future.result()
         except cf.process.BrokenProcessPool:
-            return {"ok": False, "died": True, "seconds": 0.0,
-                    "error": "worker process died (killed by the OS, e.g. out of memory, or crashed)"}
+            return JobFailure(died=True, error="worker process died (killed by the OS, e.g. out of memory, or crashed)")
 
     def close(self, cancel: bool = False) -> None:
         for pool in self._pools.values():
@@ -491,26 +474,9 @@ class DaskExecutor:
         where = "LocalCluster" if self._cluster is not None else self.client.scheduler.address
         return f"dask: {where}, {self.workers} worker(s)"
 
-    def submit_render_plan(self, task):
-        return self.client.submit(run_render_plan, task, self.out_dir, self.env, pure=False,
-                                  key=f"render-plan-{task.sequence.name}-{task.render_hash[:12]}")
-
-    def submit_render_chunk(self, task, plan: dict, indices: list[int]):
+    def submit(self, job: Job):
         # threads=None: each Dask worker renders with its own thread count (one per single-threaded worker).
-        return self.client.submit(run_render_chunk, task, plan, indices, self.out_dir, self.env, None, pure=False,
-                                  key=f"render-{task.sequence.name}-{task.render_hash[:12]}-{indices[0]:06d}")
-
-    def submit_noise_probe(self, task, plan: dict):
-        return self.client.submit(run_noise_probe, task, plan, self.out_dir, self.env, None, pure=False,
-                                  key=f"noise-probe-{task.sequence.name}-{task.render_hash[:12]}")
-
-    def submit_warp_chunk(self, task, plan: dict, anchors: list[int]):
-        return self.client.submit(run_warp_chunk, task, plan, anchors, self.out_dir, self.env, None, pure=False,
-                                  key=f"warp-{task.sequence.name}-{task.render_hash[:12]}-{anchors[0]:06d}")
-
-    def submit_simulation(self, task):
-        return self.client.submit(run_simulation, task, self.out_dir, self.env, pure=False,
-                                  key=f"simulate-{task.sequence_name}-{task.lux:g}lx-{task.recording_hash[:12]}")
+        return self.client.submit(run_job, job, self.out_dir, self.env, None, pure=False, key=job.dask_key)
 
     @staticmethod
     def slots() -> int:
@@ -527,11 +493,11 @@ class DaskExecutor:
         return done
 
     @staticmethod
-    def result(future) -> dict[str, Any]:
+    def result(future) -> JobResult:
         try:
             return future.result()
         except Exception as exc:  # noqa: BLE001 - a lost worker or a killed task
-            return {"ok": False, "error": f"dask task failed ({type(exc).__name__}: {exc})", "seconds": 0.0}
+            return JobFailure(error=f"dask task failed ({type(exc).__name__}: {exc})")
 
     def close(self, cancel: bool = False) -> None:
         with contextlib.suppress(Exception):

@@ -1,15 +1,17 @@
 """Dataset generation (``simspad generate``): render each sequence once per speed, simulate every
 sequence × speed × lux.
 
-The job is a small dependency graph run by an executor (:mod:`simspad.dataset.executors`) through the driver's
+The work is a small dependency graph of typed jobs (:mod:`simspad.dataset.jobs`) run by an executor
+(:mod:`simspad.dataset.executors`, one ``submit(job)``) through the driver's
 :class:`~simspad.dataset.task_queue.TaskQueue`: one render per (sequence, speed) (shared by all lux levels and
-sensors) into ``<out>/renders/<sequence>[_x<k>]-<hash>/`` — a plan task, then chunks of keyframes spread over every
-worker, then ``timeline.json`` written here once every chunk is back — then one simulation per (sequence, speed,
-lux) into ``<out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5``, which also states the image motion
-measured on its render (:mod:`simspad.render.image_motion`). Keyframes are written under their final names (each
-atomically), so a killed run's keyframes are kept and the next run renders only the missing ones. The driver (this
-module, in the calling process, with :mod:`~simspad.dataset.manifest_state`) is the only writer of
-``manifest.json``, which it rewrites atomically as results arrive.
+sensors) into ``<out>/renders/<sequence>[_x<k>]-<hash>/`` — a layout job, then chunks of keyframes and the noise
+probe spread over every worker (and a warp render's synthesis jobs), then ``timeline.json`` written here once
+every job is back, each render's phases kept by a :class:`~simspad.dataset.render_job.RenderJob` — then one
+simulation per (sequence, speed, lux) into ``<out>/recordings/<sequence>/<sequence>[_x<k>]_<lux>lx.h5``, which
+also states the image motion measured on its render (:mod:`simspad.render.image_motion`). Keyframes are written
+under their final names (each atomically), so a killed run's keyframes are kept and the next run renders only the
+missing ones. The driver (this module, in the calling process, with :mod:`~simspad.dataset.manifest_state`) is the
+only writer of ``manifest.json``, which it rewrites atomically as results arrive.
 
 Determinism: every recording draws from ``child_seed(spec.seed, sequence, lux, kind)`` (stream key
 ``(sequence, lux)``), every render from ``child_seed(spec.seed, sequence, "render")``, so outputs are the same
@@ -33,7 +35,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 from tqdm import tqdm
 
@@ -53,16 +55,15 @@ from simspad.dataset.manifest_state import (
     dataset_created_utc,
     load_previous_manifest,
 )
-from simspad.dataset.plan import Plan, RecordingTask, RenderTask, make_plan
+from simspad.dataset.plan import DatasetPlan, RecordingTask, RenderTask, make_plan
 from simspad.dataset.spec import DatasetSpec
 from simspad.dataset.spec_validation import load_spec
-from simspad.dataset.task_queue import Job, TaskQueue
+from simspad.dataset.jobs import ChunkJob, Job, JobFailure, SimulationJob, SimulationResult
+from simspad.dataset.render_job import RenderJob, RenderOutcome
+from simspad.dataset.task_queue import TaskQueue
 from simspad.errors import SimSpadError
 from simspad.io.atomic import ensure_writable_dir
 from simspad.io.manifest import recording_is_complete
-from simspad.render.render_plan import RenderPlan, chunk_size_for, keyframe_chunks
-from simspad.render.renderer import finalize_render, with_warp_results
-from simspad.render.warp_schedule import anchor_indices
 
 
 @dataclass
@@ -168,7 +169,7 @@ def _remove_obsolete(out_dir: Path, manifest: ManifestState, log) -> None:
             shutil.rmtree(p, ignore_errors=True)
 
 
-def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorConfig, progress, log):
+def _run(out_dir: Path, plan: DatasetPlan, manifest: ManifestState, executor: ExecutorConfig, progress, log):
     # Which recordings are already there (verified: hash of the spec inputs and sha256 of the bytes)?
     todo, skipped = [], []
     for task in plan.recordings:
@@ -203,96 +204,45 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
                  leave=True, dynamic_ncols=True)
     bar_s = tqdm(total=len(todo), desc="recordings", unit="rec", disable=not progress, position=1, leave=True,
                  dynamic_ncols=True)
-    render_times = {r.rel_dir: manifest.ren[r.rel_dir].get("timings", {}).get("render_s") for r in plan.renders}
-    waiting = {}  # render rel_dir -> [RecordingTask] waiting for that render
     queue = TaskQueue(ex, log)
+    books = _Books(manifest, outcome, queue, bar_s, log,
+                   {r.rel_dir: manifest.ren[r.rel_dir].get("timings", {}).get("render_s") for r in plan.renders})
     for task in todo:
         if any(r.rel_dir == task.render_rel_dir for r in renders):
-            waiting.setdefault(task.render_rel_dir, []).append(task)
+            books.waiting.setdefault(task.render_rel_dir, []).append(task)
         else:
-            queue.add(_simulation_job(ex, task))
-    for r in renders:
-        queue.add(Job("plan", r, lambda r=r: ex.submit_render_plan(r), label=f"the render plan of {r.sequence.name}"))
-    chunked: dict[str, _ChunkedRender] = {}
+            queue.add(SimulationJob(task))
+    running_renders = {r.rel_dir: RenderJob(r, out_dir, ex.workers, bar_k, log) for r in renders}
+    for render in running_renders.values():
+        for job in render.start():
+            queue.add(job)
     partial: dict[Job, int] = {}  # running render chunk -> its keyframes already written (shown on the bar)
     pending_renders = {r.rel_dir for r in renders}  # not finished (or failed) yet in this run
     clean_exit = False
     try:
         while queue.busy:
             for job, res in queue.finished():
-                if job.kind == "sim":
-                    _simulation_done(manifest, job.payload, res, render_times, outcome, log)
+                if isinstance(job, SimulationJob):
+                    books.simulation_done(job.task, res)
                     bar_s.update(1)
                     manifest.save()
                     continue
-                if job.kind == "plan":
-                    r = job.payload
-                    if not res.get("ok"):
-                        _render_done(manifest, r, res, waiting, queue, ex, outcome, render_times, bar_s, log)
-                        manifest.save()
-                        pending_renders.discard(r.rel_dir)
-                        _release_shared(queue, ex, r.rel_dir, chunked, renders)
-                        continue
-                    state = chunked[r.rel_dir] = _ChunkedRender(res["plan"], seconds=res.get("seconds", 0.0),
-                                                                host=res.get("host"),
-                                                                names=tuple(res["plan"]["names"]))
-                    existing = set(res.get("existing", ()))
-                    planned = RenderPlan.from_dict(res["plan"])
-                    warp, n_shared = planned.warp, planned.n_shared
-                    # A warp render renders its anchors (and a noise probe) first, then synthesizes between them.
-                    wanted = (anchor_indices(res["n_keyframes"], warp["stride"]) if warp
-                              else range(res["n_keyframes"]))
-                    todo_kf = [i for i in wanted if i not in existing]
-                    if existing:
-                        log(f"render of {r.sequence.name}: {len(existing)} of {res['n_keyframes']} keyframes "
-                            "already there (kept from an interrupted run)")
-                    n_todo = res["n_keyframes"] - (len(wanted) - len(todo_kf))
-                    if (r.prefix is not None and r.prefix.rel_dir in pending_renders
-                            and any(i < n_shared for i in todo_kf)):
-                        # The slower render is still running: its keyframes are linked once it is done. They
-                        # join the bar's total only then: counted now, the ETA would price them as renders.
-                        state.shared = [i for i in todo_kf if i < n_shared]
-                        state.deferred = set(state.shared)
-                        todo_kf = [i for i in todo_kf if i >= n_shared]
-                        state.left += 1
-                    bar_k.total += n_todo - len(state.deferred)
-                    bar_k.refresh()
-                    state.left += _submit_chunks(queue, ex, r, res["plan"], todo_kf)
-                    if warp:
-                        state.anchors = list(wanted)
-                    # Every render gets a noise probe (keyframe 0 again with the next seed): the warps are judged
-                    # against it, and timeline.json and every recording state the render-noise budget from it.
-                    state.left += 1
-                    queue.add(Job("chunk", (r, []), lambda r=r, p=res["plan"]: ex.submit_noise_probe(r, p),
-                                  label=f"the noise probe of {r.sequence.name}"))
-                else:
-                    r, c = job.payload
-                    state = chunked[r.rel_dir]
-                    state.left -= 1
-                    state.seconds += res.get("seconds", 0.0)
-                    shown = partial.pop(job, 0)  # its keyframes the bar already counts from their files
-                    if res.get("ok"):
-                        if job.kind == "warp":
-                            state.warp_chunks.append(res["warp"])
-                            bar_k.update(c[-1] - c[0] + 1 - len(c))  # the keyframes between its anchors
-                        else:
-                            bar_k.total += len(state.deferred.intersection(c))
-                            bar_k.update(len(c) - shown)
-                    else:
-                        bar_k.update(-shown)
-                        if state.error is None:
-                            state.error = res.get("error")
-                if state.left == 0 and state.anchors and not state.warp_started and state.error is None:
-                    state.warp_started = True
-                    _submit_warp_chunks(queue, ex, r, state)
-                elif state.left == 0:
-                    final = _finish_render(out_dir, r, state)
-                    _render_done(manifest, r, final, waiting, queue, ex, outcome, render_times, bar_s, log)
-                    manifest.save()
-                    pending_renders.discard(r.rel_dir)
-                    _release_shared(queue, ex, r.rel_dir, chunked, renders)
+                r = job.task
+                render = running_renders[r.rel_dir]
+                prefix_pending = r.prefix is not None and r.prefix.rel_dir in pending_renders
+                for follow in render.on_result(job, res, shown=partial.pop(job, 0), prefix_pending=prefix_pending):
+                    queue.add(follow)
+                if render.outcome is None:
+                    continue
+                books.render_done(r, render.outcome)
+                manifest.save()
+                pending_renders.discard(r.rel_dir)
+                for faster in running_renders.values():  # renders sharing this one's keyframes go on
+                    if faster.task.prefix is not None and faster.task.prefix.rel_dir == r.rel_dir:
+                        for follow in faster.release_shared():
+                            queue.add(follow)
             if not bar_k.disable:
-                show_written_keyframes(out_dir, queue.running.values(), chunked, partial, bar_k)
+                show_written_keyframes(out_dir, queue.running.values(), running_renders, partial, bar_k)
         clean_exit = True
     finally:
         bar_k.close()
@@ -301,14 +251,15 @@ def _run(out_dir: Path, plan: Plan, manifest: ManifestState, executor: ExecutorC
     return outcome
 
 
-def show_written_keyframes(out_dir: Path, running, chunked: dict, partial: dict, bar) -> None:
+def show_written_keyframes(out_dir: Path, running, renders: dict[str, RenderJob], partial: dict, bar) -> None:
     """Move the keyframe ``bar`` by the keyframes that ``running`` render chunks have written so far.
 
     A chunk reports when all its keyframes are done: at 512² and 64 spp a chunk of 64 office keyframes takes about
     an hour on one core, an hour with the bar at 0 and no ETA. Each keyframe is written under its final name when
-    it is finished, so the files tell how far a chunk is (where the driver sees the workers' folder). ``partial``
-    (job -> keyframes counted) is updated; a faster speed's keyframes linked from a slower render are left to
-    their chunk's end, when they join the bar's total.
+    it is finished, so the files tell how far a chunk is (where the driver sees the workers' folder). ``renders``
+    maps render directories to their :class:`~simspad.dataset.render_job.RenderJob`; ``partial`` (job ->
+    keyframes counted) is updated; a faster speed's keyframes linked from a slower render are left to their
+    chunk's end, when they join the bar's total.
     """
     listed: dict[Path, set] = {}  # one directory listing per folder and poll, not a stat per keyframe (cluster
     # file systems serve metadata slowly: 256 workers' chunks would be ~16 000 stats a second)
@@ -322,13 +273,13 @@ def show_written_keyframes(out_dir: Path, running, chunked: dict, partial: dict,
         return listed[folder]
 
     for job in list(running):
-        if job.kind != "chunk":
+        if not isinstance(job, ChunkJob):
             continue
-        r, c = job.payload
-        state = chunked.get(r.rel_dir)
-        if not c or state is None or not state.names or state.deferred.intersection(c):
+        r, c = job.task, job.indices
+        render = renders.get(r.rel_dir)
+        if not c or render is None or not render.names or render.deferred.intersection(c):
             continue
-        paths = [out_dir / r.rel_dir / state.names[i] for i in c]
+        paths = [out_dir / r.rel_dir / render.names[i] for i in c]
         written = sum(p.name in files_in(p.parent) for p in paths)
         if written != partial.get(job, 0):
             bar.update(written - partial.get(job, 0))
@@ -336,105 +287,49 @@ def show_written_keyframes(out_dir: Path, running, chunked: dict, partial: dict,
 
 
 @dataclass
-class _ChunkedRender:
-    """A planned render whose chunks of keyframes are running."""
+class _Books:
+    """The driver's bookkeeping of finished renders and recordings: manifest entries, the outcome, the recordings
+    waiting for a render (queued once it is done), the recordings bar."""
 
-    plan: dict
-    seconds: float = 0.0  # summed over the plan and every chunk (worker time)
-    host: Any = None
-    left: int = 0  # chunks not finished yet
-    error: str | None = None  # first chunk error
-    anchors: list = field(default_factory=list)  # a warp render's anchors (empty: linear)
-    warp_started: bool = False  # its synthesis chunks are submitted
-    warp_chunks: list = field(default_factory=list)  # what they reported (chunk_result)
-    shared: list | None = None  # keyframes to link from the slower render once it is done (None: none waiting)
-    deferred: set = field(default_factory=set)  # those keyframes: outside the bar's total until their chunk is done
-    names: tuple = ()  # keyframe files relative to the render directory (the plan's)
+    manifest: ManifestState
+    outcome: GenerateResult
+    queue: TaskQueue
+    bar_s: object
+    log: Callable[[str], None]
+    render_times: dict  # render rel_dir -> its render seconds (None: not rendered yet)
+    waiting: dict = field(default_factory=dict)  # render rel_dir -> [RecordingTask] waiting for that render
 
-
-def _submit_chunks(queue, ex, r: RenderTask, plan: dict, indices: list[int]) -> int:
-    """Queue ``indices`` of a planned render in chunks over the workers; returns the number of chunks."""
-    chunks = keyframe_chunks(indices, chunk_size_for(len(indices), ex.workers))
-    for c in chunks:
-        queue.add(Job("chunk", (r, c), lambda r=r, c=c, p=plan: ex.submit_render_chunk(r, p, c),
-                      label=f"keyframes {c[0]}–{c[-1]} of {r.sequence.name}"))
-    return len(chunks)
-
-
-def _release_shared(queue, ex, done_rel_dir: str, chunked: dict, renders) -> None:
-    """The render ``done_rel_dir`` finished (or failed): the faster renders waiting for its keyframes get their
-    shared chunks now (linked where its files are, rendered where they are not)."""
-    for r in renders:
-        state = chunked.get(r.rel_dir)
-        if r.prefix is None or r.prefix.rel_dir != done_rel_dir or state is None or state.shared is None:
-            continue
-        shared, state.shared = state.shared, None
-        state.left += _submit_chunks(queue, ex, r, state.plan, shared) - 1
-
-
-def _submit_warp_chunks(queue, ex, r: RenderTask, state: _ChunkedRender) -> None:
-    """A warp render's second phase: runs of consecutive segments between anchors spread over the workers (the
-    segments are independent once their anchors and the noise probe exist)."""
-    anchors = state.anchors
-    groups = keyframe_chunks(range(len(anchors) - 1), chunk_size_for(len(anchors) - 1, ex.workers, largest=8))
-    state.left = len(groups)
-    for g in groups:
-        a = anchors[g[0]:g[-1] + 2]
-        queue.add(Job("warp", (r, a), lambda r=r, a=a, p=state.plan: ex.submit_warp_chunk(r, p, a),
-                      label=f"synthesis of keyframes {a[0]}–{a[-1]} of {r.sequence.name}"))
-
-
-def _finish_render(out_dir: Path, task: RenderTask, state: _ChunkedRender) -> dict:
-    """Once every chunk is back: ``timeline.json`` (in the driver; it needs no Mitsuba), or the first error."""
-    res = {"ok": False, "seconds": state.seconds, "host": state.host, "error": state.error}
-    if state.error is None:
-        try:
-            render_plan = RenderPlan.from_dict(state.plan)
-            if state.anchors:
-                render_plan = with_warp_results(render_plan, state.warp_chunks)
-            finalize_render(render_plan, out_dir / task.rel_dir)
-            res.update(ok=True, n_keyframes=render_plan.n_keyframes)
-        except SimSpadError as exc:
-            res["error"] = exc.format().replace("\n", "; ")
-    return res
-
-
-def _simulation_job(ex, task: RecordingTask) -> Job:
-    return Job("sim", task, lambda: ex.submit_simulation(task), label=task.rel_path)
-
-
-def _render_done(manifest, task: RenderTask, res, waiting, queue, ex, outcome, render_times, bar_s, log) -> None:
-    entry = manifest.ren[task.rel_dir]
-    entry["timings"] = {"render_s": round(res.get("seconds", 0.0), 3), "host": res.get("host")}
-    dependants = waiting.pop(task.rel_dir, [])
-    if res.get("ok"):
-        entry.update(status="complete", n_keyframes=res.get("n_keyframes"))
-        render_times[task.rel_dir] = entry["timings"]["render_s"]
-        outcome.renders_done.append(task.rel_dir)
+    def render_done(self, task: RenderTask, res: RenderOutcome) -> None:
+        entry = self.manifest.ren[task.rel_dir]
+        entry["timings"] = {"render_s": round(res.seconds, 3), "host": res.host}
+        dependants = self.waiting.pop(task.rel_dir, [])
+        if res.ok:
+            entry.update(status="complete", n_keyframes=res.n_keyframes)
+            self.render_times[task.rel_dir] = entry["timings"]["render_s"]
+            self.outcome.renders_done.append(task.rel_dir)
+            for rec in dependants:
+                self.queue.add(SimulationJob(rec))
+            return
+        entry.update(status="failed", error=res.error)
+        self.log(f"render of {task.sequence.name} ×{task.speed_factor:g} failed: {res.error}")
         for rec in dependants:
-            queue.add(_simulation_job(ex, rec))
-        return
-    entry.update(status="failed", error=res.get("error"))
-    log(f"render of {task.sequence.name} ×{task.speed_factor:g} failed: {res.get('error')}")
-    for rec in dependants:
-        manifest.rec[rec.rel_path].update(status="failed", error=f"render failed: {res.get('error')}")
-        outcome.failed.append(rec.rel_path)
-        bar_s.update(1)
+            self.manifest.rec[rec.rel_path].update(status="failed", error=f"render failed: {res.error}")
+            self.outcome.failed.append(rec.rel_path)
+            self.bar_s.update(1)
 
-
-def _simulation_done(manifest, task: RecordingTask, res, render_times, outcome, log) -> None:
-    entry = manifest.rec[task.rel_path]
-    timings = {"simulate_s": round(res.get("seconds", 0.0), 3), "host": res.get("host")}
-    if render_times.get(task.render_rel_dir) is not None:
-        timings["render_s_shared"] = render_times[task.render_rel_dir]
-    entry["timings"] = timings
-    if res.get("ok"):
-        entry.update(status="complete", size=res["size"], sha256=res["sha256"])
-        if res.get("motion"):
-            entry["motion"] = res["motion"]
-        entry.pop("error", None)
-        outcome.done.append(task.rel_path)
-    else:
-        entry.update(status="failed", error=res.get("error"))
-        outcome.failed.append(task.rel_path)
-        log(f"{task.rel_path} failed: {res.get('error')}")
+    def simulation_done(self, task: RecordingTask, res: SimulationResult | JobFailure) -> None:
+        entry = self.manifest.rec[task.rel_path]
+        timings = {"simulate_s": round(res.seconds, 3), "host": res.host}
+        if self.render_times.get(task.render_rel_dir) is not None:
+            timings["render_s_shared"] = self.render_times[task.render_rel_dir]
+        entry["timings"] = timings
+        if isinstance(res, SimulationResult):
+            entry.update(status="complete", size=res.size, sha256=res.sha256)
+            if res.motion:
+                entry["motion"] = res.motion
+            entry.pop("error", None)
+            self.outcome.done.append(task.rel_path)
+        else:
+            entry.update(status="failed", error=res.error)
+            self.outcome.failed.append(task.rel_path)
+            self.log(f"{task.rel_path} failed: {res.error}")

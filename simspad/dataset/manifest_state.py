@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from simspad import __version__
-from simspad.dataset.plan import Plan, scene_name
+from simspad.dataset.plan import DatasetPlan, scene_name
 from simspad.dataset.spec_hashing import spec_hash
 from simspad.io.manifest import (
     FORMAT,
@@ -42,7 +42,7 @@ def load_previous_manifest(out_dir: Path) -> dict | None:
 class ManifestState:
     """The manifest being built: entries keyed by path, rewritten atomically on every change."""
 
-    def __init__(self, out_dir: Path, spec, plan: Plan, created_utc: str, previous: dict | None):
+    def __init__(self, out_dir: Path, spec, plan: DatasetPlan, created_utc: str, previous: dict | None):
         self.out_dir = out_dir
         old = {e["path"]: e for e in (previous or {}).get("recordings", [])}
         old_renders = {e.get("path"): e for e in (previous or {}).get("renders", []) if isinstance(e, dict)}

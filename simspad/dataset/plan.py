@@ -69,7 +69,9 @@ class RecordingTask:
 
 
 @dataclass(frozen=True)
-class Plan:
+class DatasetPlan:
+    """Every render and every recording a dataset spec asks for (:func:`make_plan`): the driver's to-do list."""
+
     renders: tuple[RenderTask, ...]
     recordings: tuple[RecordingTask, ...]
 
@@ -93,7 +95,7 @@ def scene_name(scene: str) -> str:
     return resolve_scene(scene).name
 
 
-def make_plan(spec, created_utc: str) -> Plan:
+def make_plan(spec, created_utc: str) -> DatasetPlan:
     """Every render and recording of ``spec``, with the hashes that decide whether each must be (re)done.
 
     Resolving the scenes and hashing the scene and trajectory files happens here, in the calling process, so
@@ -117,7 +119,7 @@ def make_plan(spec, created_utc: str) -> Plan:
             for lux in spec.lux:
                 recordings.append(_recording_task(spec, seq, float(k), float(lux), render, seq_hash, scene,
                                                   sensors, sensors_dict, optics, versions, created_utc))
-    return Plan(tuple(renders), tuple(recordings))
+    return DatasetPlan(tuple(renders), tuple(recordings))
 
 
 def shares_keyframes(seq) -> bool:

@@ -67,7 +67,7 @@ class SequenceSpec:
         Lowest keyframe rate, Hz.
     interpolation : str
         ``"linear"``: render every keyframe; ``"warp"``: render sparse keyframes and synthesize those between by
-        reprojection, rendering for real where the warps disagree (:mod:`simspad.render.warp_schedule`).
+        reprojection, rendering for real where the warps disagree (:mod:`simspad.render.warp.schedule`).
     """
 
     name: str

@@ -3,7 +3,7 @@
 Where the two warps of a synthesized keyframe disagree in a few places only (a bright textured window behind
 thin mullions, a specular highlight), rendering those places is cheaper than rendering the whole keyframe. The
 image is cut into a fixed grid of square blocks (:func:`block_size_px`), aligned with the disagreement tiles
-(:data:`simspad.render.warp.TILE_PX`); a block is rendered with a margin as wide as the reconstruction blur's
+(:data:`TILE_PX`); a block is rendered with a margin as wide as the reconstruction blur's
 reach (:data:`simspad.render.mitsuba_scene.PSF_REACH_PX`), so its pixels are those a whole render would give up to
 Monte Carlo noise. The grid is fixed in screen space, and each block has its own seed, so a block's samples
 stay put from keyframe to keyframe as a whole render's do (frozen screen-space noise).
@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from simspad.render.warp import TILE_PX
+#: Side of the square tiles over which the two warps' difference is compared with the render noise, pixels
+#: (:mod:`simspad.render.warp.synthesis`); blocks are whole numbers of tiles. Defined here, below the warp package,
+#: because the Mitsuba scene renders blocks and the warp package uses the Mitsuba scene.
+TILE_PX = 8
 
 #: Largest side of a block, pixels (a multiple of the disagreement tile). Larger blocks waste less on margins and
 #: per-render overhead (≈ 30 ms a call here); smaller ones follow the disagreement more closely.

@@ -9,7 +9,7 @@ screen space: radiance (the scene's integrator, ``spp`` samples) and depth (an `
 of everything that determines its pixels, so re-runs re-use frames and an interrupted render resumes
 (:mod:`simspad.render.keyframe_files`); ``timeline.json`` is written last.
 
-A render is three stages (:mod:`simspad.render.render_plan`): :func:`plan_render` (keyframe instants, poses and
+A render is three stages (:mod:`simspad.render.render_layout`): :func:`layout_render` (keyframe instants, poses and
 names), :func:`render_keyframes` (any list of keyframe indices, in any process: ``simspad generate`` spreads
 chunks of them over its workers) with :func:`render_probe` (keyframe 0 again with the next seed: the render-noise
 budget's probe), and :func:`finalize_render` (``timeline.json`` with the budget, once every keyframe exists).
@@ -17,7 +17,7 @@ budget's probe), and :func:`finalize_render` (``timeline.json`` with the budget,
 
 With ``interpolation = "warp"`` (opt-in, :mod:`simspad.render.settings` says why it is not the default) only
 sparse keyframes are rendered; those between are synthesized by reprojection and rendered for real (in blocks or
-whole) only where the warps disagree (:mod:`simspad.render.warp_render`, which also spreads it over processes);
+whole) only where the warps disagree (:mod:`simspad.render.warp.rendering`, which also spreads it over processes);
 ``timeline.json`` marks each keyframe's ``source``.
 """
 
@@ -85,11 +85,12 @@ from simspad.render.mitsuba_scene import (
     MitsubaScene,
     sampler_for,
 )
-from simspad.render.render_plan import RenderPlan
+from simspad.render.render_layout import RenderLayout
 from simspad.render.schedule import brute_force_keyframes, keyframe_schedule
 from simspad.render.settings import RenderSettings
 from simspad.render.render_summary import RenderSummary
-from simspad.render.warp_render import (
+from simspad.render.warp.rendering import (
+    SegmentReport,
     chunk_result,
     merge_chunk_results,
     noise_probe_name,
@@ -98,8 +99,8 @@ from simspad.render.warp_render import (
 )
 from simspad.scenes.library import content_hash, resolve_scene
 
-__all__ = ["LoadedScene", "RenderPlan", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
-           "load_scene", "plan_render", "render_keyframes", "render_missing_geometry", "render_probe",
+__all__ = ["LoadedScene", "RenderLayout", "RenderSettings", "RenderSummary", "RenderedFrames", "finalize_render",
+           "load_scene", "layout_render", "render_keyframes", "render_missing_geometry", "render_probe",
            "render_sequence", "select_variant", "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
@@ -162,15 +163,15 @@ def load_scene(scene, trajectory, width: int, height: int, spp: int, variant: st
     return LoadedScene(info, ts, traj_source, traj_hash, ms, variant, counter)
 
 
-def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | None = None,
+def layout_render(scene, trajectory, settings: RenderSettings, *, variant: str | None = None,
                 spad_bin_s: float | None = None, loaded: LoadedScene | None = None,
-                prefix: RenderPlan | None = None, prefix_time_scale: float = 1.0) -> RenderPlan:
+                prefix: RenderLayout | None = None, prefix_time_scale: float = 1.0) -> RenderLayout:
     """Stage 1: the keyframe instants, poses and file names of a render, and its ``timeline.json`` fields.
 
     Loads the scene (unless ``loaded`` is given), checks the trajectory covers the span, and runs the adaptive
     schedule. Writes nothing. Arguments as :func:`render_sequence`.
 
-    ``prefix`` (a linearly interpolated plan with the same scene, size, samples and seed) makes this render's first
+    ``prefix`` (a linearly interpolated layout with the same scene, size, samples and seed) makes this render's first
     keyframes those of ``prefix``, at its instants times ``prefix_time_scale``, with its poses and file names: the
     same sequence played faster (:mod:`simspad.dataset.speed`) passes through the same poses, so the files of
     the slower render serve this one too and need not be rendered again (:func:`link_shared_keyframes`). The
@@ -247,13 +248,13 @@ def plan_render(scene, trajectory, settings: RenderSettings, *, variant: str | N
     geometry = plan_geometry(ts, ms, t0, t1, settings.gt_rate_hz, base_key)
     if geometry is not None:
         timeline["geometry"] = geometry
-    return RenderPlan(times_s=tuple(float(t) for t in times), names=tuple(names), camera_to_world=tuple(cam_poses),
+    return RenderLayout(times_s=tuple(float(t) for t in times), names=tuple(names), camera_to_world=tuple(cam_poses),
                       width=width, height=height, spp=spp, seed=seed, variant=loaded.variant,
                       scene_hash=base_key["scene"], trajectory_hash=loaded.traj_hash, timeline=timeline,
                       objects_to_world=tuple(objects_to_world), base_key=base_key)
 
 
-def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: int, t0: float, t1: float,
+def _check_prefix(prefix: RenderLayout, width: int, height: int, spp: int, seed: int, t0: float, t1: float,
                   scale: float) -> None:
     """A prefix must be a linear render with this one's pixels-determining settings, starting where it starts."""
     why = None
@@ -267,18 +268,18 @@ def _check_prefix(prefix: RenderPlan, width: int, height: int, spp: int, seed: i
         raise SimSpadError(f"cannot share keyframes with that render: {why}", field="prefix")
 
 
-def link_shared_keyframes(plan: RenderPlan, indices, prefix_dir, out_dir) -> int:
-    """Hard-link the shared keyframes (:func:`plan_render`'s ``prefix``) among ``indices`` from the prefix's
+def link_shared_keyframes(layout: RenderLayout, indices, prefix_dir, out_dir) -> int:
+    """Hard-link the shared keyframes (:func:`layout_render`'s ``prefix``) among ``indices`` from the prefix's
     render directory ``prefix_dir`` into ``out_dir``; a copy where the file system cannot link. Keyframes whose
     source is missing or damaged are left to :func:`render_keyframes`, which renders the same pixels (same pose,
     seed and settings). Returns how many were linked or copied."""
     out_dir, prefix_dir = Path(out_dir), Path(prefix_dir)
-    shared = [i for i in indices if i < plan.n_shared]
+    shared = [i for i in indices if i < layout.n_shared]
     if shared:
         make_out_dir(out_dir)  # the render directory and its frames/ (a keyframe's name includes frames/)
     n = 0
     for i in shared:
-        src, dst = prefix_dir / plan.names[i], out_dir / plan.names[i]
+        src, dst = prefix_dir / layout.names[i], out_dir / layout.names[i]
         if dst.is_file() or not src.is_file() or not frame_is_intact(src):
             continue
         try:
@@ -293,23 +294,23 @@ def link_shared_keyframes(plan: RenderPlan, indices, prefix_dir, out_dir) -> int
     return n
 
 
-def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, progress: bool = False,
+def render_keyframes(scene, trajectory, layout: RenderLayout, indices, *, out_dir, progress: bool = False,
                      loaded: LoadedScene | None = None, on_frame: Callable[[int], None] | None = None
                      ) -> "RenderedFrames":
-    """Stage 2: render the keyframes ``indices`` of ``plan`` whose files are not in ``out_dir`` yet.
+    """Stage 2: render the keyframes ``indices`` of ``layout`` whose files are not in ``out_dir`` yet.
 
-    Any subset, in any order, in any process: every keyframe uses the plan's fixed seed, so its bytes do not
+    Any subset, in any order, in any process: every keyframe uses the layout's fixed seed, so its bytes do not
     depend on what else this call renders. A later stage may call this with an explicit list (e.g. only the
     keyframes a synthesis step could not produce).
 
     Parameters
     ----------
     scene, trajectory
-        As given to :func:`plan_render` (reloaded here unless ``loaded`` is given; their content hashes must
-        match the plan's).
-    plan : RenderPlan
+        As given to :func:`layout_render` (reloaded here unless ``loaded`` is given; their content hashes must
+        match the layout's).
+    layout : RenderLayout
     indices : iterable of int
-        Keyframe indices into ``plan``.
+        Keyframe indices into ``layout``.
     out_dir : str or Path
         Render directory (created if missing).
     progress : bool
@@ -320,61 +321,61 @@ def render_keyframes(scene, trajectory, plan: RenderPlan, indices, *, out_dir, p
     Raises
     ------
     SimSpadError
-        An index out of range, or a scene, trajectory or Mitsuba variant other than the plan's.
+        An index out of range, or a scene, trajectory or Mitsuba variant other than the layout's.
     """
     out_dir = Path(out_dir)
     indices = [int(i) for i in indices]
-    bad = [i for i in indices if not 0 <= i < plan.n_keyframes]
+    bad = [i for i in indices if not 0 <= i < layout.n_keyframes]
     if bad:
-        raise SimSpadError(f"keyframe index {bad[0]} outside the plan's 0..{plan.n_keyframes - 1}", field="indices")
+        raise SimSpadError(f"keyframe index {bad[0]} outside the layout's 0..{layout.n_keyframes - 1}", field="indices")
     make_out_dir(out_dir)
     # A cached keyframe is decoded once here: a damaged one is rendered again, not re-used.
-    paths = {i: out_dir / plan.names[i] for i in indices}
+    paths = {i: out_dir / layout.names[i] for i in indices}
     todo = {i for i, path in paths.items() if not path.is_file() or not frame_is_intact(path)}
-    geometry = plan.timeline.get("geometry")
-    geometry_todo = missing_geometry(geometry, owned_instants(plan.times_s, geometry, indices), out_dir,
-                                     plan.width, plan.height)
+    geometry = layout.timeline.get("geometry")
+    geometry_todo = missing_geometry(geometry, owned_instants(layout.times_s, geometry, indices), out_dir,
+                                     layout.width, layout.height)
     if (todo or geometry_todo) and loaded is None:
-        loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
+        loaded = load_scene(scene, trajectory, layout.width, layout.height, layout.spp, layout.variant)
     if loaded is not None:
-        _check_same_inputs(plan, loaded)
+        _check_same_inputs(layout, loaded)
     counter = loaded.counter if loaded is not None else None
     if counter is not None:
         counter.take()  # kernels of loading and depth probes belong to no frame
-    # Objects are posed as the plan says (shared keyframes were planned on the slower trajectory).
-    frames = [(i, plan.times_s[i], np.asarray(plan.camera_to_world[i]), paths[i], i in todo,
-               {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world else None)
+    # Objects are posed as the layout says (shared keyframes were planned on the slower trajectory).
+    frames = [(i, layout.times_s[i], np.asarray(layout.camera_to_world[i]), paths[i], i in todo,
+               {k: np.asarray(m) for k, m in layout.objects_to_world[i].items()} if layout.objects_to_world else None)
               for i in indices]
     converged = None
-    if todo and plan.timeline.get("renderer", {}).get("convergence"):
-        converged = _converged_renderer(plan, loaded, out_dir)
-    done = _render_frames(loaded, frames, plan.seed, counter, progress, on_frame, converged)
+    if todo and layout.timeline.get("renderer", {}).get("convergence"):
+        converged = _converged_renderer(layout, loaded, out_dir)
+    done = _render_frames(loaded, frames, layout.seed, counter, progress, on_frame, converged)
     if geometry_todo:  # the geometry passes at the ground-truth instants these keyframes own
         render_geometry(loaded.ms, geometry, geometry_todo, out_dir)
     return done
 
 
-def render_missing_geometry(plan: RenderPlan, keyframe_indices, out_dir, loaded: LoadedScene) -> int:
+def render_missing_geometry(layout: RenderLayout, keyframe_indices, out_dir, loaded: LoadedScene) -> int:
     """Render the geometry passes that the keyframes ``keyframe_indices`` own and that ``out_dir`` lacks (warp
     renders, whose keyframes are synthesized rather than rendered by :func:`render_keyframes`)."""
-    geometry = plan.timeline.get("geometry")
-    todo = missing_geometry(geometry, owned_instants(plan.times_s, geometry, keyframe_indices), Path(out_dir),
-                            plan.width, plan.height)
+    geometry = layout.timeline.get("geometry")
+    todo = missing_geometry(geometry, owned_instants(layout.times_s, geometry, keyframe_indices), Path(out_dir),
+                            layout.width, layout.height)
     return render_geometry(loaded.ms, geometry, todo, Path(out_dir)) if todo else 0
 
 
-def render_probe(scene, trajectory, plan: RenderPlan, *, out_dir, loaded: LoadedScene | None = None) -> bool:
+def render_probe(scene, trajectory, layout: RenderLayout, *, out_dir, loaded: LoadedScene | None = None) -> bool:
     """Stage 2b: the render-noise budget's noise probe (keyframe 0 again with the next seed,
-    :func:`~simspad.render.warp_render.render_noise_probe`) into ``out_dir`` unless it is there; in any process, like
+    :func:`~simspad.render.warp.rendering.render_noise_probe`) into ``out_dir`` unless it is there; in any process, like
     :func:`render_keyframes` (whose arguments these are). True if it was rendered now."""
     out_dir = Path(out_dir)
-    if (out_dir / noise_probe_name(plan)).is_file():
+    if (out_dir / noise_probe_name(layout)).is_file():
         return False
     make_out_dir(out_dir)
     if loaded is None:
-        loaded = load_scene(scene, trajectory, plan.width, plan.height, plan.spp, plan.variant)
-    _check_same_inputs(plan, loaded)
-    return render_noise_probe(loaded.ms, loaded.ts, plan, out_dir)
+        loaded = load_scene(scene, trajectory, layout.width, layout.height, layout.spp, layout.variant)
+    _check_same_inputs(layout, loaded)
+    return render_noise_probe(loaded.ms, loaded.ts, layout, out_dir)
 
 
 def convergence_fields(settings: RenderSettings) -> dict | None:
@@ -392,26 +393,26 @@ def cache_file_name(base_key: dict) -> str:
     return f"{CACHE_FILE_PREFIX}{frame_key(base_key, -1.0)}.npz"
 
 
-def _converged_renderer(plan: RenderPlan, loaded: LoadedScene, out_dir: Path):
-    """The :class:`ConvergedRenderer` of ``plan`` and its cache: read from the render directory, or built from
-    the plan's probe keyframes (the same values in any process) and written there."""
-    fields = plan.timeline["renderer"]["convergence"]
-    cr = ConvergedRenderer(loaded.ms, plan.spp)
+def _converged_renderer(layout: RenderLayout, loaded: LoadedScene, out_dir: Path):
+    """The :class:`ConvergedRenderer` of ``layout`` and its cache: read from the render directory, or built from
+    the layout's probe keyframes (the same values in any process) and written there."""
+    fields = layout.timeline["renderer"]["convergence"]
+    cr = ConvergedRenderer(loaded.ms, layout.spp)
     path = out_dir / fields["cache_file"]
     cache = load_cache(path) if path.is_file() else None
     if cache is None:
-        poses = [(np.asarray(plan.camera_to_world[i]),
-                  {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world
-                  else object_poses(loaded.ts, plan.times_s[i]))
-                 for i in probe_indices(plan.n_keyframes, fields["cache_probes"])]
-        cache = build_cache(cr, poses, plan.seed, fields["cache_samples"], fields["cache_cell_px"])
+        poses = [(np.asarray(layout.camera_to_world[i]),
+                  {k: np.asarray(m) for k, m in layout.objects_to_world[i].items()} if layout.objects_to_world
+                  else object_poses(loaded.ts, layout.times_s[i]))
+                 for i in probe_indices(layout.n_keyframes, fields["cache_probes"])]
+        cache = build_cache(cr, poses, layout.seed, fields["cache_samples"], fields["cache_cell_px"])
         save_cache(cache, path)
     return cr, cache
 
 
-def finalize_render(plan: RenderPlan, out_dir) -> Path:
+def finalize_render(layout: RenderLayout, out_dir) -> Path:
     """Stage 3: write ``timeline.json`` (which marks the render directory complete) once every keyframe file of
-    ``plan`` exists, and delete frames of earlier renders into the same directory that it does not reference.
+    ``layout`` exists, and delete frames of earlier renders into the same directory that it does not reference.
 
     Raises
     ------
@@ -419,52 +420,52 @@ def finalize_render(plan: RenderPlan, out_dir) -> Path:
         Keyframe files missing (their count and the first one).
     """
     out_dir = Path(out_dir)
-    missing = [name for name in plan.names if not (out_dir / name).is_file()]
+    missing = [name for name in layout.names if not (out_dir / name).is_file()]
     if missing:
-        raise SimSpadError(f"{len(missing)} of {plan.n_keyframes} keyframes not rendered yet (first: {missing[0]})",
+        raise SimSpadError(f"{len(missing)} of {layout.n_keyframes} keyframes not rendered yet (first: {missing[0]})",
                            path=out_dir)
-    geometry = [g["file"] for g in plan.timeline.get("geometry", {}).get("instants", [])]
+    geometry = [g["file"] for g in layout.timeline.get("geometry", {}).get("instants", [])]
     missing = [name for name in geometry if not (out_dir / name).is_file()]
     if missing:
         raise SimSpadError(f"{len(missing)} of {len(geometry)} geometry passes not rendered yet (first: "
                            f"{missing[0]})", path=out_dir)
-    path = write_timeline_json(out_dir, width=plan.width, height=plan.height, keyframes=plan.keyframes(),
-                               **plan.timeline, render_noise=measure_render_noise(plan, out_dir))
-    remove_stale_frames(out_dir, set(plan.names) | {noise_probe_name(plan)})
+    path = write_timeline_json(out_dir, width=layout.width, height=layout.height, keyframes=layout.keyframes(),
+                               **layout.timeline, render_noise=measure_render_noise(layout, out_dir))
+    remove_stale_frames(out_dir, set(layout.names) | {noise_probe_name(layout)})
     remove_stale_geometry(out_dir, set(geometry))
-    keep = plan.timeline.get("renderer", {}).get("convergence", {}).get("cache_file")
+    keep = layout.timeline.get("renderer", {}).get("convergence", {}).get("cache_file")
     for stale in out_dir.glob(f"{CACHE_FILE_PREFIX}*.npz"):  # caches of earlier converged renders into out_dir
         if stale.name != keep:
             stale.unlink(missing_ok=True)
     return path
 
 
-def measure_render_noise(plan: RenderPlan, out_dir) -> dict | None:
+def measure_render_noise(layout: RenderLayout, out_dir) -> dict | None:
     """The render-noise budget of a render (``timeline.json``'s ``render_noise``) from keyframe 0's file and its
-    noise probe (:func:`~simspad.render.warp_render.render_noise_probe`: keyframe 0 again with the next seed), or
+    noise probe (:func:`~simspad.render.warp.rendering.render_noise_probe`: keyframe 0 again with the next seed), or
     None where the probe was not rendered (a render made before SimSPAD rendered one for every render).
 
     :func:`simspad.radiance.noise_budget.render_noise_budget` defines the figures; the probe's file and seed are
     stored with them, so a recording can state its own figure at its lux level."""
     out_dir = Path(out_dir)
-    probe = noise_probe_name(plan)
+    probe = noise_probe_name(layout)
     if not (out_dir / probe).is_file():
         return None
-    y0 = luminance_from_rgb(read_exr(out_dir / plan.names[0])["rgb"])
+    y0 = luminance_from_rgb(read_exr(out_dir / layout.names[0])["rgb"])
     y1 = luminance_from_rgb(read_exr(out_dir / probe)["rgb"])
     return {**render_noise_budget(y0, y1), "probe_file": probe, "probe_keyframe": 0,
-            "probe_seed": plan.seed + PROBE_SEED_OFFSET, "probe_renders": 1}
+            "probe_seed": layout.seed + PROBE_SEED_OFFSET, "probe_renders": 1}
 
 
-def _check_same_inputs(plan: RenderPlan, loaded: LoadedScene) -> None:
-    if loaded.variant != plan.variant:
-        raise SimSpadError(f"this worker renders with Mitsuba variant {loaded.variant} but the plan was made with "
-                           f"{plan.variant}: give every worker the same DRJIT_LIBLLVM_PATH", field="variant")
-    if content_hash(loaded.info) != plan.scene_hash:
-        raise SimSpadError("the scene changed since the render was planned", path=loaded.info.source or
+def _check_same_inputs(layout: RenderLayout, loaded: LoadedScene) -> None:
+    if loaded.variant != layout.variant:
+        raise SimSpadError(f"this worker renders with Mitsuba variant {loaded.variant} but the layout was made with "
+                           f"{layout.variant}: give every worker the same DRJIT_LIBLLVM_PATH", field="variant")
+    if content_hash(loaded.info) != layout.scene_hash:
+        raise SimSpadError("the scene changed since the render was laid out", path=loaded.info.source or
                            loaded.info.folder, field="scene")
-    if loaded.traj_hash != plan.trajectory_hash:
-        raise SimSpadError("the trajectory changed since the render was planned", path=loaded.traj_source,
+    if loaded.traj_hash != layout.trajectory_hash:
+        raise SimSpadError("the trajectory changed since the render was laid out", path=loaded.traj_source,
                            field="trajectory")
 
 
@@ -473,7 +474,7 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
                     progress: bool = True, variant: str | None = None,
                     spad_bin_s: float | None = None) -> RenderSummary:
     """Render radiance keyframes of ``scene`` along ``trajectory`` into a render directory: the three stages
-    (:func:`plan_render`, :func:`render_keyframes` of every keyframe, :func:`finalize_render`) in this process.
+    (:func:`layout_render`, :func:`render_keyframes` of every keyframe, :func:`finalize_render`) in this process.
 
     Parameters
     ----------
@@ -509,54 +510,54 @@ def render_sequence(scene, trajectory, settings: RenderSettings, *, out_dir,
     created = make_out_dir(out_dir)
     try:
         loaded = load_scene(scene, trajectory, width, height, int(settings.spp), variant)
-        plan = plan_render(scene, trajectory, settings, spad_bin_s=spad_bin_s, loaded=loaded)
+        layout = layout_render(scene, trajectory, settings, spad_bin_s=spad_bin_s, loaded=loaded)
     except BaseException:
         remove_created(created)
         raise
     probe_s = None
-    if plan.warp is not None:
-        done, plan = _render_warped(plan, loaded, out_dir, progress)
-        render_missing_geometry(plan, range(plan.n_keyframes), out_dir, loaded)
+    if layout.warp is not None:
+        done, layout = _render_warped(layout, loaded, out_dir, progress)
+        render_missing_geometry(layout, range(layout.n_keyframes), out_dir, loaded)
     else:
-        done = render_keyframes(scene, trajectory, plan, range(plan.n_keyframes), out_dir=out_dir,
+        done = render_keyframes(scene, trajectory, layout, range(layout.n_keyframes), out_dir=out_dir,
                                 progress=progress, loaded=loaded)
         # The render-noise budget's probe (the warp schedule renders it for its own use): one keyframe more.
         tic = time.perf_counter()
-        probe_s = time.perf_counter() - tic if render_probe(scene, trajectory, plan, out_dir=out_dir,
+        probe_s = time.perf_counter() - tic if render_probe(scene, trajectory, layout, out_dir=out_dir,
                                                             loaded=loaded) else 0.0
-    finalize_render(plan, out_dir)
+    finalize_render(layout, out_dir)
     render_noise = json.loads((out_dir / TIMELINE_FILE).read_text()).get("render_noise")
-    schedule = plan.timeline["schedule"]
-    return RenderSummary(out_dir=out_dir, n_keyframes=plan.n_keyframes, n_rendered=len(done.frame_times_s),
+    schedule = layout.timeline["schedule"]
+    return RenderSummary(out_dir=out_dir, n_keyframes=layout.n_keyframes, n_rendered=len(done.frame_times_s),
                          n_reused=done.n_reused, duration_s=float(settings.duration_s),
-                         start_s=plan.timeline["start_s"],
-                         n_spad_bins=schedule.get("n_spad_bins"), render_s=done.render_s, variant=plan.variant,
+                         start_s=layout.timeline["start_s"],
+                         n_spad_bins=schedule.get("n_spad_bins"), render_s=done.render_s, variant=layout.variant,
                          compiled_first_frame=done.compiled[0] if done.compiled else -1,
                          compiled_after_first=sum(done.compiled[1:]) if loaded.counter.enabled else -1,
                          max_predicted_flow_px=schedule["max_predicted_flow_px"], spad_bin_s=spad_bin_s,
-                         frame_times_s=done.frame_times_s, n_warped=list(plan.sources).count("warp"),
-                         render_noise=render_noise, probe_s=probe_s if plan.warp is None else None)
+                         frame_times_s=done.frame_times_s, n_warped=list(layout.sources).count("warp"),
+                         render_noise=render_noise, probe_s=probe_s if layout.warp is None else None)
 
 
-def _render_warped(plan: RenderPlan, loaded: LoadedScene, out_dir: Path, progress: bool):
-    """Render sparse keyframes of ``plan`` and synthesize the rest (:mod:`simspad.render.warp_render`); the
-    plan comes back with the keyframes' files and sources and the warp schedule in its timeline fields."""
+def _render_warped(layout: RenderLayout, loaded: LoadedScene, out_dir: Path, progress: bool):
+    """Render sparse keyframes of ``layout`` and synthesize the rest (:mod:`simspad.render.warp.rendering`); the
+    layout comes back with the keyframes' files and sources and the warp schedule in its timeline fields."""
     loaded.counter.take()  # kernels of loading and depth probes belong to no frame
-    bar = _progress(plan.n_keyframes, progress)
+    bar = _progress(layout.n_keyframes, progress)
     try:
-        done = render_with_warps(loaded.ms, loaded.ts, plan, out_dir, loaded.counter, bar)
+        done = render_with_warps(loaded.ms, loaded.ts, layout, out_dir, loaded.counter, bar)
     finally:
         bar.close()
-    return done, with_warp_results(plan, [chunk_result(done, 0, plan.n_keyframes - 1)])
+    return done, with_warp_results(layout, [chunk_result(done, 0, layout.n_keyframes - 1)])
 
 
-def with_warp_results(plan: RenderPlan, chunks: list[dict]) -> RenderPlan:
-    """``plan`` with the keyframe files, sources and ``schedule.warp`` fields that the warp chunks reported
-    (:func:`simspad.render.warp_render.chunk_result`, any order): what :func:`finalize_render` then writes."""
-    names, sources, warp = merge_chunk_results(plan.n_keyframes, chunks, plan.warp)
-    schedule = dict(plan.timeline["schedule"], n_rendered_keyframes=sources.count("render"), warp=warp)
-    return dataclasses.replace(plan, names=tuple(names), sources=tuple(sources),
-                               timeline=dict(plan.timeline, schedule=schedule))
+def with_warp_results(layout: RenderLayout, chunks: list[SegmentReport]) -> RenderLayout:
+    """``layout`` with the keyframe files, sources and ``schedule.warp`` fields that the warp chunks reported
+    (:func:`simspad.render.warp.rendering.chunk_result`, any order): what :func:`finalize_render` then writes."""
+    names, sources, warp = merge_chunk_results(layout.n_keyframes, chunks, layout.warp)
+    schedule = dict(layout.timeline["schedule"], n_rendered_keyframes=sources.count("render"), warp=warp)
+    return dataclasses.replace(layout, names=tuple(names), sources=tuple(sources),
+                               timeline=dict(layout.timeline, schedule=schedule))
 
 
 class RenderedFrames(NamedTuple):

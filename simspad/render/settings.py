@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from simspad import defaults
 from simspad.errors import SimSpadError
-from simspad.render.warp_schedule import WARP_STRIDE, WARP_THRESHOLD
+from simspad.render.warp.schedule import WARP_STRIDE, WARP_THRESHOLD
 
 
 #: Keyframe interpolation modes: synthesize between sparse renders by reprojection, or render every keyframe.
@@ -63,7 +63,7 @@ class RenderSettings:
         Render seed, the same for every frame (noise frozen in screen space).
     interpolation : str
         ``"warp"``: render sparse keyframes and synthesize those between by reprojection, rendering for real
-        where the warps disagree (:mod:`simspad.render.warp_schedule`); ``"linear"``: render every keyframe.
+        where the warps disagree (:mod:`simspad.render.warp.schedule`); ``"linear"``: render every keyframe.
         Both give the same keyframe instants; the timeline is linear in time between keyframes either way.
     warp_stride : int
         With ``"warp"``: rendered keyframes are at most this many keyframes apart.

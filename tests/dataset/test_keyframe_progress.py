@@ -7,21 +7,24 @@ import io
 
 from tqdm import tqdm
 
-from simspad.dataset.generate import _ChunkedRender, show_written_keyframes
+from simspad.dataset.generate import show_written_keyframes
+from simspad.dataset.jobs import ChunkJob, ProbeJob
 from simspad.dataset.plan import RenderTask
-from simspad.dataset.task_queue import Job
+from simspad.dataset.render_job import RenderJob
 
 
 def test_bar_counts_the_keyframe_files_running_chunks_have_written(tmp_path):
     names = tuple(f"frames/{i:06d}-k{i}.exr" for i in range(8))
     fast = RenderTask(sequence=None, render_hash="h", rel_dir="renders/a", seed=0)
-    chunked = {fast.rel_dir: _ChunkedRender({}, names=names, deferred={6, 7})}
-    (tmp_path / fast.rel_dir / "frames").mkdir(parents=True)
-    render = Job("chunk", (fast, [0, 1, 2, 3]), submit=lambda: None)
-    linked = Job("chunk", (fast, [6, 7]), submit=lambda: None)  # linked from a slower render: counted at its end
-    probe = Job("chunk", (fast, []), submit=lambda: None)  # a warp render's noise probe: no keyframe of the plan
-    running, partial = [render, linked, probe], {}
     bar = tqdm(total=6, file=io.StringIO())
+    state = RenderJob(fast, tmp_path, 1, bar, print)
+    state.names, state.deferred = names, {6, 7}
+    chunked = {fast.rel_dir: state}
+    (tmp_path / fast.rel_dir / "frames").mkdir(parents=True)
+    render = ChunkJob(fast, None, (0, 1, 2, 3))
+    linked = ChunkJob(fast, None, (6, 7))  # linked from a slower render: counted at its end
+    probe = ProbeJob(fast, None)  # the noise probe: no keyframe of the layout
+    running, partial = [render, linked, probe], {}
 
     def write(*indices):
         for i in indices:

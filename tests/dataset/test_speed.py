@@ -19,7 +19,7 @@ from simspad.dataset.estimate import (
     disk_needed_bytes,
     estimate_spec,
 )
-from simspad.dataset.executors import ExecutorConfig, plan_render_task
+from simspad.dataset.executors import ExecutorConfig, render_layout_of
 from simspad.dataset.generate import generate
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec_validation import load_spec
@@ -119,7 +119,7 @@ def test_speeds_chain_their_shared_keyframes(tmp_path):
     renders = {r.speed_factor: r for r in make_plan(spec, "2025-01-01T00:00:00Z").renders
                if r.sequence.scene == "office"}
     planned = {}
-    plans = {k: planned.setdefault(renders[k].rel_dir, plan_render_task(renders[k], planned)) for k in (1.0, 2.0, 4.0)}
+    plans = {k: planned.setdefault(renders[k].rel_dir, render_layout_of(renders[k], planned)) for k in (1.0, 2.0, 4.0)}
     assert renders[4.0].prefix == renders[2.0] and renders[2.0].prefix == renders[1.0]
     for slow, fast in ((1.0, 2.0), (2.0, 4.0)):
         n = plans[slow].n_keyframes

@@ -8,6 +8,7 @@ from simspad.motion.generators import static_pose
 from simspad.motion.trajectory import TrajectorySet
 from simspad.render.blocks import (
     BLOCK_CALL_SAMPLES,
+    TILE_PX,
     block_grid,
     block_seed,
     block_size_px,
@@ -18,7 +19,6 @@ from simspad.render.blocks import (
 )
 from simspad.render.mitsuba_scene import PSF_REACH_PX, MitsubaScene
 from simspad.render.renderer import select_variant
-from simspad.render.warp import TILE_PX
 from simspad.scenes.library import resolve_scene
 
 

@@ -144,13 +144,13 @@ def test_simspad_render_compares_with_the_spad_preset_bin(tmp_path, capsys):
 def test_stages_in_chunks_give_the_bytes_of_one_render(tmp_path):
     """plan → keyframes in two interleaved chunks, each in its own scene load (as two workers) → the noise probe →
     finalize: every file byte-identical to render_sequence's; finalizing with a keyframe missing is refused."""
-    from simspad.render.render_plan import RenderPlan
-    from simspad.render.renderer import finalize_render, plan_render, render_keyframes, render_probe
+    from simspad.render.render_layout import RenderLayout
+    from simspad.render.renderer import finalize_render, layout_render, render_keyframes, render_probe
 
     folder = _textured_folder(tmp_path / "tex")
     settings = RenderSettings(duration_s=0.03, resolution=(W, H), spp=2, min_rate_hz=100.0)
     render_sequence(folder, _pan(), settings, out_dir=tmp_path / "whole", progress=False)
-    plan = RenderPlan.from_dict(plan_render(folder, _pan(), settings).to_dict())  # as it travels to workers
+    plan = RenderLayout.from_dict(layout_render(folder, _pan(), settings).to_dict())  # as it travels to workers
     assert plan.n_keyframes >= 4
     out = tmp_path / "chunks"
     render_keyframes(folder, _pan(), plan, range(1, plan.n_keyframes, 2), out_dir=out)

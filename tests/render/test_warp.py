@@ -17,8 +17,8 @@ from simspad.motion.trajectory import TrajectorySet, look_at
 from simspad.radiance.timeline import Timeline
 from simspad.render.renderer import RenderSettings, render_sequence, select_variant
 from simspad.render.reprojection import PinholeCamera
-from simspad.render.warp import WarpSource, prepare, synthesize
-from simspad.render.warp_schedule import PATCH_MAX_RENDERS, anchor_indices, synthesize_keyframes
+from simspad.render.warp.synthesis import WarpSource, prepare, synthesize
+from simspad.render.warp.schedule import PATCH_MAX_RENDERS, anchor_indices, synthesize_keyframes
 
 W, H = 64, 48
 CAM = PinholeCamera.from_fov(50.0, W, H)
@@ -185,6 +185,32 @@ def test_a_rendered_target_geometry_puts_moving_silhouettes_right():
 
 
 # ------------------------------------------------------------------------------------------ schedule
+class _Keyframes:
+    """A :class:`~simspad.render.warp.schedule.KeyframeSource` over analytic frames: ``render(i)`` and the poses
+    given, synthesized frames kept in ``written``, an optional geometry pass."""
+
+    def __init__(self, render, poses, geometry=None):
+        self._render, self.poses, self._geometry, self.written = render, poses, geometry, {}
+
+    def render(self, i):
+        return self._render(i)
+
+    def pose(self, i):
+        return self.poses[i], ()
+
+    def geometry(self, i):
+        return None if self._geometry is None else self._geometry(i)
+
+    def emission(self, i):
+        return None
+
+    def write(self, i, rgb, depth_z, object_id):
+        self.written.setdefault(i, rgb)
+
+    def final(self, i):
+        pass
+
+
 def _schedule(threshold, stride=8, n=17):
     poses = [_pose(0.2 * i / (n - 1), 0.0) for i in range(n)]
     rendered = []
@@ -193,11 +219,9 @@ def _schedule(threshold, stride=8, n=17):
         rendered.append(i)
         return _source(poses[i])
 
-    written = {}
-    plan = synthesize_keyframes(CAM, np.linspace(0.0, 1.0, n), render, lambda i: (poses[i], ()),
-                                lambda i, rgb, z, ids: written.setdefault(i, rgb), stride=stride,
-                                threshold=threshold)
-    return plan, rendered, written
+    keyframes = _Keyframes(render, poses)
+    report = synthesize_keyframes(CAM, np.linspace(0.0, 1.0, n), keyframes, stride=stride, threshold=threshold)
+    return report, rendered, keyframes.written
 
 
 def test_schedule_renders_anchors_and_bisects_where_warps_disagree():
@@ -219,9 +243,8 @@ def test_schedule_renders_anchors_and_bisects_where_warps_disagree():
         _, z, _ = _trace(poses[i])
         return z, None
 
-    plan_g = synthesize_keyframes(CAM, np.linspace(0.0, 1.0, 17), lambda i: _source(poses[i]),
-                                  lambda i: (poses[i], ()), lambda i, rgb, z, ids: None, stride=8, threshold=1.0,
-                                  geometry=geometry)
+    plan_g = synthesize_keyframes(CAM, np.linspace(0.0, 1.0, 17), _Keyframes(lambda i: _source(poses[i]), poses,
+                                                                             geometry), stride=8, threshold=1.0)
     assert sorted(asked) == [i for i in range(17) if plan_g.sources[i] == "warp"]
     # Deterministic: the same inputs give bit-identical synthesized frames.
     _, _, again = _schedule(threshold=1.0)
@@ -384,7 +407,7 @@ def test_cli_interpolation_flag(tmp_path, _variant):
 def test_disagreement_is_measured_in_noise_units_per_tile():
     # Two warps differing by two renders' noise alone score about 1; a wrong patch of one tile stands out
     # although it barely moves the frame's RMS.
-    from simspad.render.warp import _tile_noise_ratios
+    from simspad.render.warp.synthesis import _tile_noise_ratios
 
     def _tile_noise_ratio(diff, both, sigma):  # the worst tile
         return _tile_noise_ratios(diff, both, sigma).max()
@@ -443,17 +466,17 @@ def test_schedule_renders_only_the_blocks_where_warps_disagree():
     noise = np.full((H, W), 0.02)
 
     def run(patch):
-        rendered, written = [], {}
+        rendered = []
 
         def render(i):
             rendered.append(i)
             rgb, z, ids = _trace_with_sheen(poses[i])
             return WarpSource(rgb, z, poses[i])
 
-        plan = synthesize_keyframes(CAM, np.linspace(0.0, 1.0, n), render, lambda i: (poses[i], ()),
-                                    lambda i, rgb, z, ids: written.setdefault(i, rgb), stride=4, threshold=2.0,
-                                    noise_y=noise, patch=patch)
-        return plan, rendered, written
+        keyframes = _Keyframes(render, poses)
+        report = synthesize_keyframes(CAM, np.linspace(0.0, 1.0, n), keyframes, stride=4, threshold=2.0,
+                                      noise_y=noise, patch=patch)
+        return report, rendered, keyframes.written
 
     # Without blocks the sheen makes the schedule bisect: more keyframes rendered than the two anchors.
     plan_b, rendered_b, _ = run(None)

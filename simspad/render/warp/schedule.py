@@ -2,36 +2,36 @@
 
 The keyframe instants are those of the linear schedule (:func:`simspad.render.schedule.keyframe_schedule`), so a
 warp timeline is as dense in time as a linear one; only every ``stride``-th keyframe (and the last) is rendered
-up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesize`.
-If the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.Disagreement.score`), it
+up front. The keyframes between two rendered ones are synthesized by :func:`simspad.render.warp.synthesis.synthesize`.
+If the worst of them disagrees by more than ``threshold`` (:meth:`simspad.render.warp.synthesis.Disagreement.score`), it
 is usually in a few places only (a bright textured window behind thin mullions): then, with a ``patch``
 (:class:`Patcher`), just the image blocks holding the failing tiles are rendered for real in every keyframe of the
 segment (the same blocks throughout, so their Monte Carlo noise stays frozen as a whole render's does), as long
 as they cost at most :data:`PATCH_MAX_FRACTION` of a render per keyframe and :data:`PATCH_MAX_RENDERS` renders
 over the segment. Otherwise the keyframe in the middle is rendered for real and both halves are treated again
-(recursive bisection), down to neighbours. With a ``geometry`` callback (the renderer's 1-spp depth + id pass at
-each synthesized instant) the target's depth and ids are rendered rather than splatted from the sources.
-Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
+(recursive bisection), down to neighbours. The renderer's side is one object, a :class:`KeyframeSource`: it
+renders keyframes, gives their poses, stores synthesized ones and hears when each is final; where it renders a
+geometry pass (1-spp depth + ids) at each synthesized instant, the target's depth and ids are rendered rather
+than splatted from the sources. Decisions depend only on the rendered pixels, so the schedule is deterministic; at most
 ``log2(stride)`` levels of re-synthesis are done per segment, and only two rendered keyframes per level are held
 in memory.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
 from simspad.render.reprojection import PinholeCamera
-from simspad.render.warp import Disagreement, WarpSource, prepare, synthesize
+from simspad.render.warp.synthesis import Disagreement, WarpSource, prepare, synthesize
 
 #: Rendered keyframes are at most this many keyframes of the linear schedule apart.
 WARP_STRIDE = 16
-#: Largest disagreement score of a synthesized keyframe (:meth:`simspad.render.warp.Disagreement.score`): the worst
-#: tile's RMS difference of the two warps in units of what two renders' Monte Carlo noise alone would give (≈ 1
-#: where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
+#: Largest disagreement score of a synthesized keyframe (:meth:`simspad.render.warp.synthesis.Disagreement.score`):
+#: the worst tile's RMS difference of the two warps in units of what two renders' Monte Carlo noise alone would give
+#: (≈ 1 where the warps agree up to noise), plus holes. Two warps with independent errors s differ by √2·s and their
 #: mid-way blend errs by s/√2: a ratio ≤ 2 keeps the blend's error within about √2 × a render's own noise.
 WARP_THRESHOLD = 2.0
 #: Largest cost (as a fraction of a whole render) of the blocks rendered into each keyframe of a segment whose
@@ -59,8 +59,38 @@ def anchor_indices(n_keyframes: int, stride: int) -> list[int]:
     return idx
 
 
+class KeyframeSource(Protocol):
+    """The keyframes of a render as :func:`synthesize_keyframes` sees them, by index: the renderer's side
+    (:class:`simspad.render.warp.rendering.MitsubaKeyframes` for a Mitsuba scene)."""
+
+    def render(self, i: int) -> WarpSource:
+        """Keyframe ``i`` rendered for real (or read from its file) and written."""
+
+    def pose(self, i: int) -> tuple[np.ndarray, tuple]:
+        """``(camera_to_world, object_poses)`` of keyframe ``i`` (object poses in the order of
+        :attr:`WarpSource.object_poses`)."""
+
+    def geometry(self, i: int) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """``(depth_z, object_id)`` of keyframe ``i`` from a rendered geometry pass, asked once per synthesized
+        keyframe; None: the target geometry is splatted from the sources
+        (:func:`simspad.render.warp.synthesis.synthesize`)."""
+
+    def emission(self, i: int) -> np.ndarray | None:
+        """The directly visible emission of keyframe ``i`` (an emission pass; the sources then carry theirs,
+        :class:`~simspad.render.warp.synthesis.WarpSource`), asked for each keyframe synthesized between sources
+        of which at least one shows emission; None without an emission layer. Between two sources that show
+        none, the warp needs none: an emitter that would come into view only between them is warped like any
+        surface."""
+
+    def write(self, i: int, rgb: np.ndarray, depth_z: np.ndarray, object_id: np.ndarray | None) -> None:
+        """Store synthesized keyframe ``i``."""
+
+    def final(self, i: int) -> None:
+        """Keyframe ``i`` is final, rendered or synthesized (progress)."""
+
+
 class Patcher(Protocol):
-    """Renders parts of a synthesized keyframe for real (:class:`simspad.render.warp_render.BlockPatcher` for a
+    """Renders parts of a synthesized keyframe for real (:class:`simspad.render.warp.rendering.BlockPatcher` for a
     Mitsuba scene)."""
 
     def blocks(self, tiles: np.ndarray) -> np.ndarray:
@@ -77,7 +107,7 @@ class Patcher(Protocol):
 
 
 @dataclass
-class WarpPlanResult:
+class SynthesisReport:
     """What the synthesis did.
 
     Attributes
@@ -108,15 +138,10 @@ class WarpPlanResult:
         return float(sum(cost for cost, _ in self.patched.values()))
 
 
-def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Callable[[int], WarpSource],
-                         target: Callable[[int], tuple[np.ndarray, tuple]],
-                         write: Callable[[int, np.ndarray, np.ndarray, np.ndarray | None], None], *,
+def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, keyframes: KeyframeSource, *,
                          stride: int = WARP_STRIDE, threshold: float = WARP_THRESHOLD,
-                         noise_y: np.ndarray | None = None,
-                         geometry: Callable[[int], tuple] | None = None,
-                         emission: Callable[[int], np.ndarray] | None = None,
-                         on_keyframe: Callable[[int], None] | None = None,
-                         patch: Patcher | None = None, anchors: list[int] | None = None) -> WarpPlanResult:
+                         noise_y: np.ndarray | None = None, patch: Patcher | None = None,
+                         anchors: list[int] | None = None) -> SynthesisReport:
     """Render the anchors, synthesize the rest, render where the warps disagree.
 
     Parameters
@@ -124,30 +149,17 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
     camera : PinholeCamera
     times_s : ndarray (K,)
         All keyframe instants, s.
-    render : callable
-        ``render(i) -> WarpSource``: render keyframe ``i`` for real (or load it from the cache) and write it.
-    target : callable
-        ``target(i) -> (camera_to_world, object_poses)`` at keyframe ``i``.
-    write : callable
-        ``write(i, rgb, depth_z, object_id)``: store synthesized keyframe ``i``.
+    keyframes : KeyframeSource
+        Renders, poses, geometry and emission passes of keyframes by index, stores synthesized ones, and hears
+        when each is final (:class:`simspad.render.warp.rendering.MitsubaKeyframes` for a Mitsuba scene).
     stride : int
         Rendered keyframes up front are this many keyframes apart (:data:`WARP_STRIDE`).
     threshold : float
         Largest :meth:`Disagreement.score` accepted (:data:`WARP_THRESHOLD`: in units of the render noise when
         ``noise_y`` is given).
     noise_y : ndarray [H, W], optional
-        Monte Carlo noise of one render per pixel (absolute σ of luminance), see :func:`simspad.render.warp.synthesize`.
-    geometry : callable, optional
-        ``geometry(i) -> (depth_z, object_id)``: the rendered depth and ids of keyframe ``i`` (a geometry pass),
-        asked once per synthesized keyframe; without it the target geometry is splatted from the sources
-        (:func:`simspad.render.warp.synthesize`).
-    emission : callable, optional
-        ``emission(i)``: the directly visible emission of keyframe ``i`` (an emission pass; the sources then carry
-        theirs, :class:`~simspad.render.warp.WarpSource`), asked for each keyframe synthesized between sources
-        of which at least one shows emission. Between two that show none, the warp needs none: an emitter that
-        would come into view only between them is warped like any surface.
-    on_keyframe : callable, optional
-        Called with each keyframe index once it is final (progress).
+        Monte Carlo noise of one render per pixel (absolute σ of luminance), see
+        :func:`simspad.render.warp.synthesis.synthesize`.
     patch : Patcher, optional
         Renders the blocks of a segment's synthesized keyframes where the warps disagree, instead of bisecting,
         when that costs at most :data:`PATCH_MAX_FRACTION` of a render per keyframe and :data:`PATCH_MAX_RENDERS`
@@ -159,36 +171,33 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
 
     Returns
     -------
-    WarpPlanResult
+    SynthesisReport
     """
     times = np.asarray(times_s, dtype=np.float64)
     n = times.size
     sources = [SOURCE_WARP] * n
-    result = WarpPlanResult(sources)
-    tick = on_keyframe or (lambda i: None)
+    result = SynthesisReport(sources)
+    tick = keyframes.final
     geometries: dict = {}  # keyframe → its geometry pass, until it is written or rendered (≤ stride frames)
     emissions: dict = {}  # keyframe → its emission pass, likewise
 
     def geometry_of(i: int):
-        if geometry is None:
-            return None
         if i not in geometries:
-            geometries[i] = geometry(i)
+            geometries[i] = keyframes.geometry(i)
         return geometries[i]
 
     def emission_of(i: int):
-        if emission is None:
-            return None
         if i not in emissions:
-            emissions[i] = emission(i)
-            result.emission_passes.add(i)
+            emissions[i] = keyframes.emission(i)
+            if emissions[i] is not None:
+                result.emission_passes.add(i)
         return emissions[i]
 
     def rendered(i: int):
         geometries.pop(i, None)
         emissions.pop(i, None)
         sources[i] = SOURCE_RENDER
-        p = prepare(render(i))
+        p = prepare(keyframes.render(i))
         tick(i)
         return p
 
@@ -197,14 +206,14 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
             return
         frames = {}
         for i in range(i0 + 1, i1):
-            pose, objects = target(i)
+            pose, objects = keyframes.pose(i)
             w = float((times[i] - times[i0]) / (times[i1] - times[i0]))
             target_emission = emission_of(i) if p0.emits or p1.emits else None
             frames[i] = synthesize(camera, p0, p1, w, pose, objects, noise_y, geometry_of(i), target_emission)
         worst = max(f[3].score() for f in frames.values())
         if worst <= threshold:
             for i, (rgb, depth, ids, dis) in frames.items():
-                write(i, rgb, depth, ids)
+                keyframes.write(i, rgb, depth, ids)
                 geometries.pop(i, None)
                 emissions.pop(i, None)
                 result.disagreement[i] = dis
@@ -217,7 +226,7 @@ def synthesize_keyframes(camera: PinholeCamera, times_s: np.ndarray, render: Cal
             if cost <= PATCH_MAX_FRACTION and (i1 - i0 - 1) * cost <= PATCH_MAX_RENDERS:
                 covered = patch.tiles(blocks, failing.shape)
                 for i, (rgb, depth, ids, dis) in frames.items():
-                    write(i, patch.apply(i, blocks, rgb), depth, ids)
+                    keyframes.write(i, patch.apply(i, blocks, rgb), depth, ids)
                     geometries.pop(i, None)
                     emissions.pop(i, None)
                     result.disagreement[i] = dis
@@ -264,5 +273,6 @@ def describe_patches(patched: dict) -> dict:
 
 
 __all__ = ["PATCH_MAX_FRACTION", "PATCH_MAX_RENDERS", "SOURCE_RENDER", "SOURCE_WARP", "WARP_STRIDE",
-           "WARP_THRESHOLD", "Disagreement", "Patcher", "WarpPlanResult", "anchor_indices", "describe_disagreement",
+           "WARP_THRESHOLD", "Disagreement", "KeyframeSource", "Patcher", "SynthesisReport", "anchor_indices",
+           "describe_disagreement",
            "describe_patches", "describe_scores", "synthesize_keyframes"]

@@ -1,11 +1,12 @@
-"""The plan of one render: every keyframe's instant, pose and file name, and what ``timeline.json`` will say.
+"""The layout of one render: every keyframe's instant, pose and file name, and what ``timeline.json`` will say.
 
-A render runs in three stages (:mod:`simspad.render.renderer`): *plan* (load the scene once, predict the image
-motion, choose the keyframe instants; :class:`RenderPlan`), *render* any subset of keyframe indices, in any number
-of processes or machines, and *finalize* (write ``timeline.json`` once every keyframe file exists). Each keyframe
-is rendered with the same fixed seed and named by a hash of everything that determines its pixels, so its bytes
-do not depend on which chunk, process or order rendered it. A plan is plain data (JSON-serialisable through
-:meth:`RenderPlan.to_dict`), so it travels to workers as a task argument and finalizing needs no Mitsuba.
+A render runs in three stages (:mod:`simspad.render.renderer`): *layout* (load the scene once, predict the image
+motion, choose the keyframe instants: :func:`~simspad.render.renderer.layout_render` gives a
+:class:`RenderLayout`), *render* any subset of keyframe indices, in any number of processes or machines, and
+*finalize* (write ``timeline.json`` once every keyframe file exists). Each keyframe is rendered with the same
+fixed seed and named by a hash of everything that determines its pixels, so its bytes do not depend on which
+chunk, process or order rendered it. A layout is plain data (picklable, and JSON-serialisable through
+:meth:`RenderLayout.to_dict`), so it travels to workers as a job argument and finalizing needs no Mitsuba.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
-class RenderPlan:
-    """Everything the render and finalize stages need, computed once by the plan stage.
+class RenderLayout:
+    """Everything the render and finalize stages need, computed once by the layout stage.
 
     Attributes
     ----------
@@ -29,7 +30,7 @@ class RenderPlan:
     width, height, spp, seed : int
         Image size (px), samples per pixel and Monte Carlo seed of every keyframe.
     variant : str
-        Mitsuba variant the plan was made with; every render stage must use the same one.
+        Mitsuba variant the layout was made with; every render stage must use the same one.
     scene_hash, trajectory_hash : str
         Content hashes of the scene and the trajectory, checked by each render stage.
     timeline : dict
@@ -93,7 +94,7 @@ class RenderPlan:
                 "sources": list(self.sources), "base_key": self.base_key}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "RenderPlan":
+    def from_dict(cls, d: dict) -> "RenderLayout":
         return cls(times_s=tuple(float(t) for t in d["times_s"]), names=tuple(d["names"]),
                    camera_to_world=tuple(tuple(tuple(float(v) for v in row) for row in pose)
                                          for pose in d["camera_to_world"]),

@@ -22,7 +22,7 @@ is carried to the target pose by reprojection (:mod:`simspad.render.reprojection
 
 The **disagreement** of a synthesized keyframe measures how far the two warps are from the same image: the
 relative RMS difference of their luminance where both are consistent, plus the fraction of holes
-(:class:`Disagreement`); :mod:`simspad.render.warp_schedule` renders a keyframe for real where it exceeds a
+(:class:`Disagreement`); :mod:`simspad.render.warp.schedule` renders a keyframe for real where it exceeds a
 threshold. Everything is deterministic numpy (no atomics, no threads): the same sources give bit-identical
 frames.
 
@@ -38,6 +38,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates, maximum_filter, spline_filter
 
 from simspad.physics.radiometry import luminance_from_rgb
+from simspad.render.blocks import TILE_PX
 from simspad.render.reprojection import PinholeCamera, move_points, project, unproject
 
 #: Stand-in depth (m) for rays that hit nothing: far enough that only rotation moves them.
@@ -46,8 +47,6 @@ FAR_DEPTH_M = 1e7
 DEPTH_TOLERANCE = 0.02
 #: Rounds of hole filling (each closes holes one pixel wide) after the forward splat.
 HOLE_FILL_ROUNDS = 3
-#: Side of the square tiles over which the two warps' difference is compared with the render noise, pixels.
-TILE_PX = 8
 #: A tile's noise is floored at this fraction of the frame's RMS noise (tiles a render gets noiseless, e.g. flat
 #: light, must not turn any resampling round-off into a failure).
 TILE_NOISE_FLOOR = 0.5
