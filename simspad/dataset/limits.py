@@ -3,7 +3,7 @@
 Per-field type checks live in :mod:`simspad.dataset.spec_validation`; this module adds what needs several fields
 or a bound with a figure: each sequence's render size, samples and keyframe count
 (:func:`simspad.render.settings.render_limit_problems`), every sensor's model checks at the sequence's size
-(the same ones the simulators run, so nothing fails after rendering), the lux range, the event camera's noise
+(the same ones the simulators run, so nothing fails after rendering), the event camera's noise
 work (:func:`simspad.sensors.events.model.noise_work_problem`, a lower bound whatever the scene), and the number
 of frames, SPAD bins and ground-truth instants of each recording (at least one, at most
 :data:`~simspad.defaults.MAX_SAMPLES_PER_RECORDING`).
@@ -24,11 +24,6 @@ _SETTINGS_FIELD = {"duration": "duration_s"}
 def spec_limit_problems(spec) -> list[tuple[str, str]]:
     """(field path, message) for every bound or cross-field rule ``spec`` breaks (empty: fine)."""
     out: list[tuple[str, str]] = []
-    lo, hi = defaults.LUX_RANGE
-    for i, lux in enumerate(spec.lux):
-        if not lo <= lux <= hi:
-            out.append((f"lux[{i}]", f"{lux:g} lx is outside {lo:g}–{hi:g} lx (starlight is ~1e-3 lx, direct "
-                        "sunlight ~1e5 lx): such a level gives NaN or all-zero images"))
     for kind, checker in (("spad", spad_model.validate_params), ("events", events_model.validate_params)):
         if kind in spec.sensors:
             out += _model_problems(checker, spec.sensors[kind].params)

@@ -18,12 +18,13 @@ from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.dataset.speed import DEFAULT_SPEEDS, coverage_problem
 from simspad.errors import SimSpadError, SpecError
-from simspad.render.settings import DEFAULT_INTERPOLATION, INTERPOLATIONS
+from simspad.render.settings import DEFAULT_INTERPOLATION, INTERPOLATIONS, resolution_problem
 from simspad.io.bundled import DATA_ROOT, TRAJECTORIES_DIR
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
 from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
+from simspad.sensors.recording_settings import lux_problem
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
 _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
@@ -174,11 +175,13 @@ def _validate_lux(raw: dict, err: _Errors) -> list[float]:
         return []
     out = []
     for i, v in enumerate(value):
-        x = _number(err, f"lux[{i}]", v, positive=True, what="an illuminance in lux > 0")
-        if x is not None:
-            if x in out:
-                err.add(f"lux[{i}]", f"duplicate lux level {v!r} (expected distinct levels)")
-            out.append(x)
+        problem = lux_problem(v)  # the recording settings' own rule and message
+        if problem:
+            err.add(f"lux[{i}]", problem)
+            continue
+        if float(v) in out:
+            err.add(f"lux[{i}]", f"duplicate lux level {v!r} (expected distinct levels)")
+        out.append(float(v))
     return out
 
 
@@ -284,9 +287,9 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
                     what="a start time in seconds ≥ 0")
 
     resolution = t.get("resolution", list(defaults.RESOLUTION_PX))
-    if (not isinstance(resolution, list) or len(resolution) != 2
-            or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in resolution)):
-        err.add(f"{where}.resolution", f"got {resolution!r} (expected two positive integers [W, H])")
+    problem = resolution_problem(resolution)  # the render settings' own rule and message
+    if problem:
+        err.add(f"{where}.resolution", problem)
         resolution = None
 
     spp = t.get("spp", defaults.SPP)

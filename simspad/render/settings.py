@@ -127,12 +127,10 @@ class RenderSettings:
             bad("duration", f"must be a number of seconds > 0, got {duration_s!r}")
         if not (isinstance(start_s, numbers.Real) and math.isfinite(start_s)):
             bad("start", f"must be a finite number of seconds, got {start_s!r}")
-        try:
-            width, height = (int(v) for v in resolution)
-        except (TypeError, ValueError):
-            bad("resolution", f"expected (width, height), got {resolution!r}")
-        if width <= 0 or height <= 0:
-            bad("resolution", f"width and height must be positive, got {resolution!r}")
+        problem = resolution_problem(resolution)
+        if problem:
+            bad("resolution", problem)
+        width, height = (int(v) for v in resolution)
         if not (isinstance(spp, numbers.Integral) and spp >= 1):
             bad("spp", f"must be an integer >= 1, got {spp!r}")
         if not (max_flow_px > 0):
@@ -167,6 +165,23 @@ class RenderSettings:
         if not (isinstance(self.cache_probes, numbers.Integral) and 1 <= self.cache_probes <= 256):
             bad("cache_probes", f"must be an integer in [1, 256], got {self.cache_probes!r}")
         return width, height
+
+
+def resolution_problem(resolution) -> str | None:
+    """What is wrong with an image size, or None: the one rule for a resolution, wherever it is given (a dataset
+    spec's ``resolution``, ``simspad render --resolution``, :class:`RenderSettings`).
+
+    Parameters
+    ----------
+    resolution : sequence
+        (width, height) in pixels: two integers > 0.
+    """
+    try:
+        ok = len(resolution) == 2 and all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and v > 0
+                                          for v in resolution)
+    except TypeError:
+        ok = False
+    return None if ok else f"got {resolution!r} (expected two positive integers [W, H])"
 
 
 def limits_ignored() -> bool:
