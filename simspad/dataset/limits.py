@@ -1,8 +1,9 @@
 """Resource bounds and cross-field rules of a dataset spec, checked by ``simspad info SPEC`` before any work.
 
-Per-field type checks live in :mod:`simspad.dataset.spec_validation`; this module adds what needs several fields
-or a bound with a figure: each sequence's render size, samples and keyframe count
-(:func:`simspad.render.settings.render_limit_problems`), every sensor's model checks at the sequence's size
+Per-field checks live with the records (:mod:`simspad.dataset.spec_validation` runs them; a sequence's render
+fields and their bounds are :meth:`simspad.render.settings.RenderSettings.problems`, a lux level
+:func:`simspad.sensors.recording_settings.lux_problem`); this module adds what needs several fields or a bound
+with a figure: every sensor's model checks at the sequence's size
 (the same ones the simulators run, so nothing fails after rendering), the event camera's noise
 work (:func:`simspad.sensors.events.model.noise_work_problem`, a lower bound whatever the scene), and the number
 of frames, SPAD bins and ground-truth instants of each recording (at least one, at most
@@ -13,13 +14,10 @@ from __future__ import annotations
 
 from simspad import defaults
 from simspad.errors import SimSpadError
-from simspad.render.settings import limits_ignored, render_limit_problems
+from simspad.render.settings import limits_ignored
 from simspad.sensors.events import model as events_model
 from simspad.sensors.frames import model as frames_model
 from simspad.sensors.spad import model as spad_model
-
-_SETTINGS_FIELD = {"duration": "duration_s"}
-
 
 def spec_limit_problems(spec) -> list[tuple[str, str]]:
     """(field path, message) for every bound or cross-field rule ``spec`` breaks (empty: fine)."""
@@ -34,9 +32,6 @@ def spec_limit_problems(spec) -> list[tuple[str, str]]:
     for i, seq in enumerate(spec.sequences):
         where = f"sequences[{i}]"
         w, h = seq.resolution
-        for field_name, message in render_limit_problems(w, h, seq.spp, seq.max_flow_px, seq.min_rate_hz,
-                                                         seq.duration_s):
-            out.append((f"{where}.{_SETTINGS_FIELD.get(field_name, field_name)}", message))
         if "frames" in spec.sensors:
             out += _model_problems(frames_model.validate_params, spec.sensors["frames"].params, h)
         out += _count_problems(spec, seq, where)

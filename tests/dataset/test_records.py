@@ -73,6 +73,25 @@ def test_a_bad_resolution_gets_one_message_from_the_spec_the_cli_and_the_record(
         assert not out.exists()
 
 
+@pytest.mark.parametrize("field, value", [("spp", 0), ("spp", 2.5), ("max_flow_px", -1.0), ("max_flow_px", 1e-9),
+                                          ("min_rate_hz", math.inf), ("duration_s", 0.0), ("duration_s", "long"),
+                                          ("start_s", math.nan), ("interpolation", "cubic"),
+                                          ("resolution", [16000, 16000])])
+def test_a_bad_sequence_field_gets_the_render_settings_message(field, value):
+    name = {"duration_s": "duration", "start_s": "start"}.get(field, field)
+    settings = RenderSettings(**{"duration_s": 0.02, "resolution": [16, 12], "spp": 1, field: value})
+    expected = [message for f, message in settings.problems() if f == name]
+    assert len(expected) == 1
+    assert _spec_errors(sequences=[{**SPEC["sequences"][0], field: value}]) == \
+        [f"<spec>: sequences[0].{field}: {expected[0]}"]
+
+
+def test_a_negative_start_is_the_specs_own_rule():
+    errors = _spec_errors(sequences=[{**SPEC["sequences"][0], "start_s": -1.0}])
+    assert errors == ["<spec>: sequences[0].start_s: must be ≥ 0, got -1.0 (expected a start time in seconds ≥ 0)"]
+    assert RenderSettings(duration_s=0.02, start_s=-1.0).problems() == []
+
+
 def test_every_field_a_sequence_shares_with_render_settings_is_carried_over():
     seq = SequenceSpec(name="s", scene="fan", trajectory=None, duration_s=0.25, start_s=0.5, resolution=(40, 30),
                        spp=7, max_flow_px=0.75, min_rate_hz=123.0, interpolation="warp")
