@@ -3,7 +3,10 @@
 Every field is checked before any work starts, and every problem is reported, not only the first: one
 :class:`~simspad.errors.SpecError` lists them one per line as ``FILE: field.path: what is wrong (expected ...)``.
 Scene names are resolved against the scene library, trajectory files are looked up beside the spec and then in
-the bundled ``trajectories/``, and each sequence's span must lie within its trajectory's coverage.
+the bundled ``trajectories/``, and each sequence's span must lie within its trajectory's coverage. A field that
+a record downstream carries is checked by that record's rule, so it has one message wherever it comes from: a
+sequence's render fields by :meth:`simspad.render.settings.RenderSettings.problems`, each lux level by
+:func:`simspad.sensors.recording_settings.lux_problem`.
 """
 
 from __future__ import annotations
