@@ -73,7 +73,7 @@ def naive_generate(spec, out: Path) -> float:
     from simspad.dataset.executors import render_layout_of
     from simspad.dataset.speed import sequence_trajectories
     from simspad.render.renderer import finalize_render, render_keyframes, select_variant
-    from simspad.sensors.simulate import RecordingSettings, simulate_recording
+    from simspad.sensors.simulate import simulate_recording
 
     t0 = time.perf_counter()
     select_variant()
@@ -86,9 +86,7 @@ def naive_generate(spec, out: Path) -> float:
                          range(layout.n_keyframes), out_dir=out / r.rel_dir)
         finalize_render(layout, out / r.rel_dir)
     for t in plan.recordings:
-        settings = RecordingSettings(lux=t.lux, sensors=dict(t.sensors), start_s=t.start_s, duration_s=t.duration_s,
-                                     seed=t.seed, stream_key=t.stream_key, gt_rate_hz=t.gt_rate_hz, optics=t.optics)
-        simulate_recording(out / t.render_rel_dir, out / t.rel_path, settings, metadata=dict(t.metadata),
+        simulate_recording(out / t.render_rel_dir, out / t.rel_path, t.settings, metadata=dict(t.metadata),
                            progress=False)
     return time.perf_counter() - t0
 

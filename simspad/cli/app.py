@@ -29,14 +29,13 @@ METHOD_NAMES_HELP = "nedi_akf, adaptive_nedi_akf, akf_fe, cf, edi, ni, nedi, qbp
 
 
 def _parse_resolution(ctx, param, value):
+    """``WxH`` text to two integers; their values are checked by :class:`~simspad.render.settings.RenderSettings`."""
     if value is None:
         return None
     try:
         w, h = (int(v) for v in value.lower().split("x"))
     except ValueError:
         raise click.BadParameter(f"expected WxH (for example 128x96), got {value!r}") from None
-    if w <= 0 or h <= 0:
-        raise click.BadParameter(f"width and height must be positive, got {value!r}")
     return (w, h)
 
 

@@ -32,17 +32,20 @@ def _legacy_render_dir(path: Path) -> set[str] | None:
 
 def render_from_cli(scene, trajectory, *, out_dir, progress: bool, **settings) -> RenderSummary:
     """``simspad render``: :func:`~simspad.render.renderer.render_sequence`, with the keyframe count compared to
-    one render per bin of the SPAD preset. ``settings``: the fields of :class:`RenderSettings`. ``trajectory``: a
+    one render per bin of the SPAD preset. ``settings``: the fields of :class:`RenderSettings`, checked by
+    the record (:meth:`RenderSettings.checked_size`: the one check of each, as for a dataset's renders). ``trajectory``: a
     file, or a bundled trajectory named as ``simspad scenes`` prints it (``trajectories/office.toml``, ``office``).
 
     ``out_dir`` must be new, empty or a render directory (marker ``.simspad-render``, or ``timeline.json``), so
     keyframes are never mixed into a dataset or another folder; it is locked while the render writes it.
     """
     out_dir = Path(out_dir)
+    render_settings = RenderSettings(**settings)
+    render_settings.checked_size()  # the record's own checks (one message per field), before the folder is made
     if trajectory is not None:
         trajectory = find_trajectory(trajectory)
     with owned_dir_in_place(out_dir, "render", legacy=_legacy_render_dir):
-        summary = render_sequence(scene, trajectory, RenderSettings(**settings), out_dir=out_dir,
+        summary = render_sequence(scene, trajectory, render_settings, out_dir=out_dir,
                                   progress=progress, spad_bin_s=SpadParams().bin_s)
         files = {"timeline.json", *(f"frames/{p.name}" for p in (out_dir / "frames").iterdir()
                                     if _RENDER_FILE.fullmatch(p.name) and not p.name.startswith("."))}

@@ -18,6 +18,7 @@ from simspad.io.atomic import check_output_file
 from simspad.io.recording.layout import FORMAT as RECORDING_FORMAT
 from simspad.io.render_dir import TIMELINE_FILE
 from simspad.sensors.presets import SENSOR_KINDS, sensor_params
+from simspad.sensors.recording_settings import lux_problem
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
 
@@ -90,8 +91,8 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
                       seed: int, overrides, out_path, gt_rate_hz: float | None = None) -> Path:
     """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`
     (ground truth at ``gt_rate_hz``; None: the render's geometry-pass rate, else the default)."""
-    if lux is None or not math.isfinite(lux) or lux <= 0:
-        raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="--lux")
+    if problem := lux_problem(lux):  # the recording settings' rule, reported under the option's name
+        raise SimSpadError(problem, field="--lux")
     kinds = parse_sensor_list(sensors)
     per_kind = parse_overrides(overrides, kinds)
     params = {}

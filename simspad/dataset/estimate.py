@@ -33,7 +33,7 @@ import shutil
 import stat
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import h5py
@@ -163,10 +163,11 @@ class UnitCosts:
     render_variant: str = ""
 
 
-def _settings(seq, resolution, duration_s, spp):
-
-    return RenderSettings(duration_s=duration_s, start_s=seq.start_s, resolution=tuple(resolution), spp=spp,
-                          max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=1)
+def _settings(seq, resolution, duration_s, spp) -> RenderSettings:
+    """``seq``'s render settings at a probe's size, span and samples, seed 1, every keyframe rendered (linear):
+    the unit costs are per rendered keyframe."""
+    return replace(seq.render_settings(seed=1), resolution=tuple(resolution), duration_s=duration_s, spp=spp,
+                   interpolation="linear")
 
 
 def _calibrate_scene(seq, tmp: Path, gpu: str | None = None) -> SceneRenderCost:
@@ -428,17 +429,18 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     for rec in plan.recordings:
         w, h = size_of[rec.render_rel_dir]
         mp = w * h / 1e6
-        gt_units = mp * rec.duration_s * rec.gt_rate_hz
+        duration_s = rec.settings.duration_s
+        gt_units = mp * duration_s * rec.settings.gt_rate_hz
         t = costs.recording_fixed_s + costs.gt_s_per_mp_frame * gt_units
         b = costs.recording_fixed_bytes + costs.bytes_per.get("gt", 0.0) * gt_units
         units = {}
         if spad is not None:
             gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
-            units["spad"] = n_bins(rec.duration_s, spad.params.bin_s, gate) * w * h / 1e9
+            units["spad"] = n_bins(duration_s, spad.params.bin_s, gate) * w * h / 1e9
         if frames is not None:
-            units["frames"] = int(rec.duration_s * frames.params.frame_rate_hz) * mp
+            units["frames"] = int(duration_s * frames.params.frame_rate_hz) * mp
         if "events" in spec.sensors:
-            units["events"] = mp * rec.duration_s
+            units["events"] = mp * duration_s
         for kind, u in units.items():
             t += costs.sim_s_per.get(kind, 0.0) * u
             b += costs.bytes_per.get(kind, 0.0) * u

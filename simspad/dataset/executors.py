@@ -68,7 +68,7 @@ from simspad.render.renderer import (
 from simspad.render.settings import RenderSettings
 from simspad.render.warp.rendering import chunk_result, render_noise_probe, render_with_warps
 from simspad.sensors.presets import SpadParams
-from simspad.sensors.simulate import RecordingSettings, simulate_recording
+from simspad.sensors.simulate import simulate_recording
 
 #: Environment variables forwarded to workers (set before Mitsuba/Dr.Jit is imported there): the same libLLVM
 #: and variant everywhere, so renders are bit-identical whichever worker runs them.
@@ -115,10 +115,9 @@ def _error_result(exc: BaseException, t0: float) -> JobFailure:
 
 
 def render_settings_of(task) -> RenderSettings:
-    seq = task.sequence
-    return RenderSettings(duration_s=seq.duration_s, start_s=seq.start_s, resolution=tuple(seq.resolution),
-                          spp=seq.spp, max_flow_px=seq.max_flow_px, min_rate_hz=seq.min_rate_hz, seed=task.seed,
-                          interpolation=seq.interpolation, gt_rate_hz=task.gt_rate_hz)
+    """The render task's settings: its sequence's (:meth:`~simspad.dataset.spec.SequenceSpec.render_settings`)
+    with the task's seed and ground-truth rate."""
+    return task.sequence.render_settings(task.seed, task.gt_rate_hz)
 
 
 def _set_render_threads(threads: int | None) -> None:
@@ -266,12 +265,9 @@ def run_simulation(task, out_dir: str, env: dict[str, str]) -> SimulationResult 
         _apply_environment(env)
         maybe_inject_fault(f"simulate:{task.rel_path}")
         out_path = Path(out_dir) / task.rel_path
-        settings = RecordingSettings(lux=task.lux, sensors=dict(task.sensors), start_s=task.start_s,
-                                     duration_s=task.duration_s, seed=task.seed, stream_key=tuple(task.stream_key),
-                                     gt_rate_hz=task.gt_rate_hz, optics=task.optics)
         render_dir = Path(out_dir) / task.render_rel_dir
         measured = {}
-        simulate_recording(render_dir, out_path, settings, metadata=dict(task.metadata), progress=False,
+        simulate_recording(render_dir, out_path, task.settings, metadata=dict(task.metadata), progress=False,
                            motion_attrs=_motion_measurement(render_dir, task, measured))
         seconds = time.perf_counter() - t0
         return SimulationResult(seconds=seconds, size=out_path.stat().st_size, sha256=file_sha256(out_path),
@@ -286,7 +282,8 @@ def _motion_measurement(render_dir: Path, task, measured: dict):
     also left in ``measured`` for the manifest."""
     def attrs(frame_exposure_s):
         exposure_s = defaults.FRAME_BLUR_EXPOSURE_S if frame_exposure_s is None else float(frame_exposure_s)
-        motion = measure_image_motion(render_dir, task.start_s, task.start_s + task.duration_s, exposure_s)
+        start_s = task.settings.start_s
+        motion = measure_image_motion(render_dir, start_s, start_s + task.settings.duration_s, exposure_s)
         measured.update(motion_attrs(motion, task.speed_factor))
         return measured
     return attrs

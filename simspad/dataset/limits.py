@@ -1,12 +1,12 @@
 """Resource bounds and cross-field rules of a dataset spec, checked by ``simspad info SPEC`` before any work.
 
-Per-field type checks live in :mod:`simspad.dataset.spec_validation`; this module adds what needs several fields
-or a bound with a figure: each sequence's render size, samples and keyframe count
-(:func:`simspad.render.settings.render_limit_problems`), every sensor's model checks at the sequence's size
-(the same ones the simulators run, so nothing fails after rendering) and its own bounds (its sensor-table row's
-``spec_problems``: the SPAD's shortest bin, the event camera's noise work, a lower bound whatever the scene), the
-lux range, and the number of rows of every sensor stream with a size model (frames, SPAD bins) and of
-ground-truth instants of each recording (at least one, at most
+Per-field checks live with the records (:mod:`simspad.dataset.spec_validation` runs them; a sequence's render
+fields and their bounds are :meth:`simspad.render.settings.RenderSettings.problems`, a lux level
+:func:`simspad.sensors.recording_settings.lux_problem`); this module adds what needs several fields or a bound
+with a figure: every sensor's model checks at the sequence's size (the same ones the simulators run, so nothing
+fails after rendering) and its own bounds (its sensor-table row's ``spec_problems``: the SPAD's shortest bin, the
+event camera's noise work, a lower bound whatever the scene), and the number of rows of every sensor stream with a
+size model (frames, SPAD bins) and of ground-truth instants of each recording (at least one, at most
 :data:`~simspad.defaults.MAX_SAMPLES_PER_RECORDING`).
 """
 
@@ -14,27 +14,17 @@ from __future__ import annotations
 
 from simspad import defaults
 from simspad.errors import SimSpadError
-from simspad.render.settings import limits_ignored, render_limit_problems
+from simspad.render.settings import limits_ignored
 from simspad.sensors.registry import ordered
-
-_SETTINGS_FIELD = {"duration": "duration_s"}
 
 
 def spec_limit_problems(spec) -> list[tuple[str, str]]:
     """(field path, message) for every bound or cross-field rule ``spec`` breaks (empty: fine)."""
     out: list[tuple[str, str]] = []
-    lo, hi = defaults.LUX_RANGE
-    for i, lux in enumerate(spec.lux):
-        if not lo <= lux <= hi:
-            out.append((f"lux[{i}]", f"{lux:g} lx is outside {lo:g}–{hi:g} lx (starlight is ~1e-3 lx, direct "
-                        "sunlight ~1e5 lx): such a level gives NaN or all-zero images"))
     sensors = ordered({kind: s.params for kind, s in spec.sensors.items()})
     for i, seq in enumerate(spec.sequences):
         where = f"sequences[{i}]"
         w, h = seq.resolution
-        for field_name, message in render_limit_problems(w, h, seq.spp, seq.max_flow_px, seq.min_rate_hz,
-                                                         seq.duration_s):
-            out.append((f"{where}.{_SETTINGS_FIELD.get(field_name, field_name)}", message))
         for row, params in sensors:  # each sensor's model checks at this size, then its own bounds
             out += _model_problems(row.validate, params, h)
             if row.spec_problems is not None:

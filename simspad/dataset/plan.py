@@ -26,6 +26,7 @@ from simspad.io.names import speed_suffix
 from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_seed
 from simspad.scenes.library import resolve_scene
+from simspad.sensors.recording_settings import RecordingSettings
 
 #: Bump when the job's output for an unchanged spec would change (part of every recording and render hash).
 JOB_SCHEME_VERSION = 2  # 2: renders carry geometry passes at the ground-truth instants; recordings their flow
@@ -49,23 +50,25 @@ class RenderTask:
 
 @dataclass(frozen=True)
 class RecordingTask:
-    """One simulation: a (sequence, lux) recording at ``<out>/<rel_path>`` from the render ``render_rel_dir``."""
+    """One simulation: a (sequence, lux) recording at ``<out>/<rel_path>`` from the render ``render_rel_dir``.
+
+    ``settings`` is what the simulator is given, built once here (lux, sensors, span, seed and stream key,
+    ground-truth rate, optics); the executors pass it through.
+    """
 
     sequence_name: str
     scene: str
-    lux: float
     rel_path: str
     render_rel_dir: str
     recording_hash: str
-    sensors: tuple  # ((kind, params dataclass), ...)
-    start_s: float
-    duration_s: float
-    seed: int
-    stream_key: tuple
-    gt_rate_hz: float
-    optics: Any  # simspad.physics.radiometry.Optics
+    settings: RecordingSettings
     metadata: tuple  # ((key, value), ...): root attrs of the recording
     speed_factor: float = 1.0  # trajectory played this many times faster (simspad.dataset.speed)
+
+    @property
+    def lux(self) -> float:
+        """The recording's illuminance, lx (``settings.lux``)."""
+        return self.settings.lux
 
 
 @dataclass(frozen=True)
@@ -101,10 +104,7 @@ def make_plan(spec, created_utc: str) -> DatasetPlan:
     Resolving the scenes and hashing the scene and trajectory files happens here, in the calling process, so
     an unknown scene or a missing file fails before any work starts.
     """
-    versions = _versions()
-    optics = Optics()
-    sensors = tuple((kind, s.params) for kind, s in spec.sensors.items())
-    sensors_dict = {kind: s.to_dict() for kind, s in spec.sensors.items()}
+    shared = _Shared(versions=_versions(), optics=Optics(), created_utc=created_utc)
     renders, recordings = [], []
     for seq in spec.sequences:
         seq_hash = sequence_hash(seq, spec)
@@ -112,13 +112,12 @@ def make_plan(spec, created_utc: str) -> DatasetPlan:
         slower = {}  # speed -> its render, for the faster ones to share
         for k in sorted(float(v) for v in spec.speed):
             prev = slower[max(slower)] if slower and shares_keyframes(seq) else None
-            slower[k] = _render_task(spec, seq, k, versions, prev)
+            slower[k] = _render_task(spec, seq, k, shared.versions, prev)
         for k in spec.speed:
             render = slower[float(k)]
             renders.append(render)
             for lux in spec.lux:
-                recordings.append(_recording_task(spec, seq, float(k), float(lux), render, seq_hash, scene,
-                                                  sensors, sensors_dict, optics, versions, created_utc))
+                recordings.append(_recording_task(spec, render, float(lux), seq_hash, scene, shared))
     return DatasetPlan(tuple(renders), tuple(recordings))
 
 
@@ -146,25 +145,38 @@ def _render_task(spec, seq, k: float, versions: dict, prefix: RenderTask | None 
                       speed_factor=k, prefix=prefix, gt_rate_hz=float(spec.evaluation.rate_hz))
 
 
-def _recording_task(spec, seq, k: float, lux: float, render: RenderTask, seq_hash: str, scene: str, sensors,
-                    sensors_dict, optics, versions, created_utc: str) -> RecordingTask:
-    """The (sequence, speed, lux) recording (k = 1: exactly the recording of a spec without a speed axis)."""
-    stream_key = (seq.name, lux, *speed_keys(k))
+@dataclass(frozen=True)
+class _Shared:
+    """What every recording of a plan shares, worked out once: package versions, optics, creation time."""
+
+    versions: dict
+    optics: Optics
+    created_utc: str
+
+
+def _recording_task(spec, render: RenderTask, lux: float, seq_hash: str, scene: str, shared: _Shared) -> RecordingTask:
+    """The recording of ``render`` (a sequence at one speed k; k = 1: exactly the recording of a spec without a
+    speed axis) at ``lux``; ``seq_hash`` and ``scene`` are the sequence's hash and scene name."""
+    seq, k = render.sequence, render.speed_factor
+    settings = RecordingSettings(
+        lux=lux, sensors={kind: s.params for kind, s in spec.sensors.items()}, start_s=seq.start_s,
+        duration_s=seq.duration_s, seed=spec.seed, stream_key=(seq.name, lux, *speed_keys(k)),
+        gt_rate_hz=spec.evaluation.rate_hz, optics=shared.optics)
+    optics = dataclasses.asdict(settings.optics)
     # What the file depends on; stored in the recording as its "spec" attr, so the hash and the file agree.
-    rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": portable_sequence(seq, spec.source_path), "lux": lux,
-                "stream_key": list(stream_key), "sensors": sensors_dict,
-                "evaluation": spec.evaluation.to_dict(), "optics": dataclasses.asdict(optics)}
-    hash_key = {"dataset": spec.name, "sequence": seq_hash, "render": render.render_hash, "lux": lux,
-                "stream_key": list(stream_key), "optics": dataclasses.asdict(optics), "versions": versions}
+    rec_spec = {"dataset": spec.name, "seed": spec.seed, "sequence": portable_sequence(seq, spec.source_path),
+                "lux": settings.lux, "stream_key": list(settings.stream_key),
+                "sensors": {kind: s.to_dict() for kind, s in spec.sensors.items()},
+                "evaluation": spec.evaluation.to_dict(), "optics": optics}
+    hash_key = {"dataset": spec.name, "sequence": seq_hash, "render": render.render_hash, "lux": settings.lux,
+                "stream_key": list(settings.stream_key), "optics": optics, "versions": shared.versions}
     metadata = {"sequence": seq.name, "scene": scene, "dataset": spec.name,
                 "trajectory": portable_trajectory(seq, spec.source_path)}
     if k != 1.0:
         rec_spec["speed_factor"] = hash_key["speed_factor"] = metadata["speed_factor"] = k
     rec_hash = spec_hash(hash_key)
-    metadata.update({"spec": canonical_json(rec_spec), "recording_hash": rec_hash, "created_utc": created_utc})
-    return RecordingTask(
-        sequence_name=seq.name, scene=scene, lux=lux, rel_path=recording_rel_path(seq.name, lux, k),
-        render_rel_dir=render.rel_dir, recording_hash=rec_hash, sensors=sensors, start_s=seq.start_s,
-        duration_s=seq.duration_s, seed=spec.seed, stream_key=stream_key,
-        gt_rate_hz=spec.evaluation.rate_hz, optics=optics, metadata=tuple(sorted(metadata.items())),
-        speed_factor=k)
+    metadata.update({"spec": canonical_json(rec_spec), "recording_hash": rec_hash,
+                     "created_utc": shared.created_utc})
+    return RecordingTask(sequence_name=seq.name, scene=scene, rel_path=recording_rel_path(seq.name, lux, k),
+                         render_rel_dir=render.rel_dir, recording_hash=rec_hash, settings=settings,
+                         metadata=tuple(sorted(metadata.items())), speed_factor=k)

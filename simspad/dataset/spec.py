@@ -39,7 +39,7 @@ from typing import Any
 
 from simspad import defaults
 from simspad.bundled import DATASETS_DIR, builtin_spec_path
-from simspad.render.settings import DEFAULT_INTERPOLATION
+from simspad.render.settings import DEFAULT_INTERPOLATION, RenderSettings
 from simspad.sensors.presets import params_to_attrs
 
 
@@ -80,6 +80,20 @@ class SequenceSpec:
     max_flow_px: float = defaults.MAX_FLOW_PX
     min_rate_hz: float = defaults.MIN_KEYFRAME_RATE_HZ
     interpolation: str = DEFAULT_INTERPOLATION
+
+    def render_settings(self, seed: int, gt_rate_hz: float | None = defaults.GT_RATE_HZ) -> RenderSettings:
+        """The sequence's render settings: the one mapping of its fields onto :class:`RenderSettings`.
+
+        Parameters
+        ----------
+        seed : int
+            Render seed (frozen Monte Carlo noise), from the plan.
+        gt_rate_hz : float or None
+            Ground-truth rate, Hz: a geometry pass at each instant (the spec's ``evaluation.rate_hz``).
+        """
+        return RenderSettings(duration_s=self.duration_s, start_s=self.start_s, resolution=tuple(self.resolution),
+                              spp=self.spp, max_flow_px=self.max_flow_px, min_rate_hz=self.min_rate_hz, seed=seed,
+                              interpolation=self.interpolation, gt_rate_hz=gt_rate_hz)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict of the fields (``interpolation`` only when it is not linear: the hashes of

@@ -3,7 +3,10 @@
 Every field is checked before any work starts, and every problem is reported, not only the first: one
 :class:`~simspad.errors.SpecError` lists them one per line as ``FILE: field.path: what is wrong (expected ...)``.
 Scene names are resolved against the scene library, trajectory files are looked up beside the spec and then in
-the bundled ``trajectories/``, and each sequence's span must lie within its trajectory's coverage.
+the bundled ``trajectories/``, and each sequence's span must lie within its trajectory's coverage. A field that
+a record downstream carries is checked by that record's rule, so it has one message wherever it comes from: a
+sequence's render fields by :meth:`simspad.render.settings.RenderSettings.problems`, each lux level by
+:func:`simspad.sensors.recording_settings.lux_problem`.
 """
 
 from __future__ import annotations
@@ -19,11 +22,12 @@ from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.dataset.speed import DEFAULT_SPEEDS, coverage_problem
 from simspad.errors import SimSpadError, SpecError
-from simspad.render.settings import DEFAULT_INTERPOLATION, INTERPOLATIONS
+from simspad.render.settings import DEFAULT_INTERPOLATION, RenderSettings
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
 from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
+from simspad.sensors.recording_settings import lux_problem
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
 _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
@@ -31,6 +35,8 @@ _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution
 _EVAL_KEYS = ("rate_hz", "methods", "params")
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _MAX_NAME_CHARS = 100  # names become file names (255 bytes at most, with suffixes)
+#: RenderSettings' names of the sequence fields it calls otherwise
+_SETTINGS_FIELD = {"duration": "duration_s", "start": "start_s"}
 
 
 class _Errors:
@@ -174,11 +180,13 @@ def _validate_lux(raw: dict, err: _Errors) -> list[float]:
         return []
     out = []
     for i, v in enumerate(value):
-        x = _number(err, f"lux[{i}]", v, positive=True, what="an illuminance in lux > 0")
-        if x is not None:
-            if x in out:
-                err.add(f"lux[{i}]", f"duplicate lux level {v!r} (expected distinct levels)")
-            out.append(x)
+        problem = lux_problem(v)  # the recording settings' own rule and message
+        if problem:
+            err.add(f"lux[{i}]", problem)
+            continue
+        if float(v) in out:
+            err.add(f"lux[{i}]", f"duplicate lux level {v!r} (expected distinct levels)")
+        out.append(float(v))
     return out
 
 
@@ -274,40 +282,32 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
             else:
                 trajectory = str(found)
 
-    duration = None
     if "duration_s" not in t:
         err.add(f"{where}.duration_s", "missing (expected a duration in seconds > 0)")
-    else:
-        duration = _number(err, f"{where}.duration_s", t["duration_s"], positive=True,
-                           what="a duration in seconds > 0")
-    start = _number(err, f"{where}.start_s", t.get("start_s", 0.0), non_negative=True,
-                    what="a start time in seconds ≥ 0")
-
-    resolution = t.get("resolution", list(defaults.RESOLUTION_PX))
-    if (not isinstance(resolution, list) or len(resolution) != 2
-            or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in resolution)):
-        err.add(f"{where}.resolution", f"got {resolution!r} (expected two positive integers [W, H])")
-        resolution = None
-
-    spp = t.get("spp", defaults.SPP)
-    if not isinstance(spp, int) or isinstance(spp, bool) or spp <= 0:
-        err.add(f"{where}.spp", f"got {_type_name(spp)} {spp!r} (expected an integer > 0 samples per pixel)")
-        spp = None
-    max_flow = _number(err, f"{where}.max_flow_px", t.get("max_flow_px", defaults.MAX_FLOW_PX), positive=True,
-                       what="pixels > 0")
-    min_rate = _number(err, f"{where}.min_rate_hz", t.get("min_rate_hz", defaults.MIN_KEYFRAME_RATE_HZ), positive=True,
-                       what="a rate in Hz > 0")
-    interpolation = t.get("interpolation", DEFAULT_INTERPOLATION)
-    if interpolation not in INTERPOLATIONS:
-        err.add(f"{where}.interpolation", f"got {interpolation!r} (expected one of {', '.join(INTERPOLATIONS)})")
+    start = t.get("start_s", 0.0)
+    if _is_number(start) and math.isfinite(start) and start < 0:  # the spec's own rule: trajectory time ≥ 0
+        err.add(f"{where}.start_s", f"must be ≥ 0, got {start!r} (expected a start time in seconds ≥ 0)")
+    values = {"duration_s": t.get("duration_s"), "start_s": start,
+              "resolution": t.get("resolution", list(defaults.RESOLUTION_PX)), "spp": t.get("spp", defaults.SPP),
+              "max_flow_px": t.get("max_flow_px", defaults.MAX_FLOW_PX),
+              "min_rate_hz": t.get("min_rate_hz", defaults.MIN_KEYFRAME_RATE_HZ),
+              "interpolation": t.get("interpolation", DEFAULT_INTERPOLATION)}
+    # The render settings' own checks, bounds included: one rule and one message per field, for a spec as for
+    # `simspad render` (a missing duration is reported above).
+    for field_name, message in RenderSettings(**values, gt_rate_hz=None).problems():
+        field_name = _SETTINGS_FIELD.get(field_name, field_name)
+        if field_name in values and not (field_name == "duration_s" and "duration_s" not in t):
+            err.add(f"{where}.{field_name}", message)
     if len(err.lines) > n_errors or name is None:
         return name, None
+    duration, start = float(values["duration_s"]), float(start)
     _check_trajectory(trajectory, scene, start, duration, where, err)
     if len(err.lines) > n_errors:
         return name, None
+    w, h = values["resolution"]
     return name, SequenceSpec(name=name, scene=scene, trajectory=trajectory, duration_s=duration, start_s=start,
-                              resolution=(resolution[0], resolution[1]), spp=spp, max_flow_px=max_flow,
-                              min_rate_hz=min_rate, interpolation=interpolation)
+                              resolution=(w, h), spp=values["spp"], max_flow_px=float(values["max_flow_px"]),
+                              min_rate_hz=float(values["min_rate_hz"]), interpolation=values["interpolation"])
 
 
 def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None:

@@ -41,13 +41,11 @@ import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.evaluate import metrics
 from simspad.evaluate.protocol import (
@@ -71,6 +69,7 @@ from simspad.io.results_dir import (
     crop,
     legacy_results,
     save_png,
+    ResultRow,
     slug,
     write_images,
     write_results_dir,
@@ -101,14 +100,10 @@ class Task:
     """The method's parameters (validated by :func:`~simspad.methods.registry.check_method_params`)."""
 
 
-def _base_row(task: Task, white: float) -> dict:
-    e = task.entry
-    return {"method": task.method, "label": task.method, "sensors": "", "scene": e.scene, "sequence": e.sequence,
-            "lux": e.lux, "recording": e.rel, "speed_factor": e.speed_factor, "image_speed_px_s": e.image_speed_px_s,
-            "psnr_db": float("nan"), "ssim": float("nan"), **star_figures(None), "bandwidth_khz_per_pixel": float("nan"),
-            "bandwidth_bits_per_pixel_s": float("nan"), "absolute_scale": True, "n_frames": 0,
-            "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": "",
-            "params": params_text(task.params)}
+def _base_row(task: Task, white: float) -> ResultRow:
+    """The task's row before the run: what the recording and the task say; every measurement NaN."""
+    return ResultRow.for_recording(task.method, task.entry, white_point_ph_s_m2=white,
+                                   params=params_text(task.params))
 
 
 def params_text(params: dict) -> str:
@@ -163,22 +158,22 @@ def _run_task(task: Task, gt_cache: GroundTruthCache | None, rec) -> dict:
                    bandwidth_khz_per_pixel=float(bw.readout_khz_per_pixel),
                    bandwidth_bits_per_pixel_s=float(bw.bits_per_pixel_s))
         if res["images"] is not None:
-            row["image"] = write_images(task.work_dir, e.key, task.method, res["images"])
+            row.image = write_images(task.work_dir, e.key, task.method, res["images"])
         if res["mtf"] is not None:
             f, m = res["mtf"]
-            row.update(star_figures(res["mtf"]))
+            row.update(**star_figures(res["mtf"]))
             out["mtf_rows"] = [{"method": task.method, "recording": e.rel, "freq_cyc_px": float(a),
                                 "mtf": float(b)} for a, b in zip(f, m)]
         out["frame_rows"] = res["frame_rows"]
     except Exception as exc:  # a method's failure is a result, not the end of the run
         if is_disk_full(exc):
             raise  # the end of the run: one line naming the results directory (evaluate's atomic_path)
-        row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+        row.error = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
     return out
 
 
-def _method_for(task: Task, rec, row: dict):
+def _method_for(task: Task, rec, row: ResultRow):
     """The task's method, built with its parameters; its label, sensors and scale into ``row``. A recording
     lacking a group the method reads is that run's failure (ValueError), not the end of the evaluation."""
     method = get_method(task.method, **task.params)
@@ -216,14 +211,14 @@ def _run_task_without_gt(task: Task, rec) -> dict:
         if res["image"] is not None:
             path = task.work_dir / "images" / slug(e.key) / f"{slug(task.method)}.png"
             save_png(path, crop(res["image"]))
-            row["image"] = path.relative_to(task.work_dir).as_posix()
+            row.image = path.relative_to(task.work_dir).as_posix()
         if res["mtf"] is not None:
             f, m = res["mtf"]
-            row.update(star_figures(res["mtf"]))
+            row.update(**star_figures(res["mtf"]))
             out["mtf_rows"] = [{"method": task.method, "recording": e.rel, "freq_cyc_px": float(a),
                                 "mtf": float(b)} for a, b in zip(f, m)]
     except Exception as exc:  # a method's failure is a result, not the end of the run
-        row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+        row.error = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         (task.work_dir / "reconstructions" / slug(e.key) / f"{slug(task.method)}.h5").unlink(missing_ok=True)
     return out
 
@@ -337,7 +332,7 @@ def timing_rows(tasks: list[Task], results: list[dict]) -> list[dict]:
     for t, r in zip(tasks, results):
         m = table.setdefault(t.method, {"method": t.method, "runs": 0, "method_s": 0.0, "total_s": 0.0})
         m["runs"] += 1
-        rt = r["row"].get("runtime_s", float("nan"))
+        rt = r["row"].runtime_s
         m["method_s"] += rt if rt == rt else 0.0
         m["total_s"] += r.get("seconds", 0.0)
     return list(table.values())
@@ -376,7 +371,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
 
     Returns
     -------
-    (out_dir, rows) — rows as in ``results.csv``.
+    (out_dir, rows) — rows as in ``results.csv`` (:meth:`~simspad.io.results_dir.ResultRow.to_dict`).
     """
     if out_dir is None:
         raise SimSpadError("an output directory is required", field="--out")
@@ -431,9 +426,7 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                 write_gt_image(tmp, e, rate_hz, whites[e.rel])
             elif whites[e.rel] is None and preview is not None:
                 preview(e.path, tmp / "previews" / f"{slug(e.key)}.png")
-        meta = {"format": "simspad-results", "format_version": 1, "simspad_version": __version__,
-                "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                "kind": "evaluate", "target": str(target), "rate_hz": rate_hz,
+        meta = {"target": str(target), "rate_hz": rate_hz,
                 "methods": sorted({t.method for t in tasks}),
                 "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
                                 "lux": e.lux, "speed_factor": e.speed_factor,
@@ -447,9 +440,9 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                 **({"params": {m: p for m, p in sorted(method_params.items())
                                if any(t.method == m for t in tasks)}} if method_params else {}),
                 "dataset": {k: (manifest or {}).get(k) for k in ("name", "spec_hash", "seed")}}
-        write_results_dir(tmp, rows, [f for r in results for f in r["frame_rows"]],
+        write_results_dir(tmp, "evaluate", rows, [f for r in results for f in r["frame_rows"]],
                           [m for r in results for m in r["mtf_rows"]], meta)
-    return out_dir, rows
+    return out_dir, [r.to_dict() for r in rows]
 
 
 def _method_params(spec_params, cli_params, *, manifest_path) -> dict[str, dict]:

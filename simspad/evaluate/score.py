@@ -10,12 +10,10 @@ the output is a results directory that ``simspad leaderboard`` reads.
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-from simspad import __version__
 from simspad.errors import InputError
 from simspad.evaluate.protocol import (
     DEFAULT_RATE_HZ,
@@ -29,7 +27,7 @@ from simspad.evaluate.protocol import (
 from simspad.evaluate.recordings import RecordingEntry, fill_entry, list_recordings, spec_evaluation
 from simspad.io.output_dirs import owned_output_dir
 from simspad.io.recording import open_recording
-from simspad.io.results_dir import check_output_dir, legacy_results, write_images, write_results_dir
+from simspad.io.results_dir import ResultRow, check_output_dir, legacy_results, write_images, write_results_dir
 from simspad.io.submission import (
     check_group_frames,
     check_group_members,
@@ -91,7 +89,7 @@ def score(submission, dataset_dir, out_dir=None, rate_hz=None) -> tuple[Path, li
 
     Returns
     -------
-    (out_dir, rows)
+    (out_dir, rows) — rows as in ``results.csv`` (:meth:`~simspad.io.results_dir.ResultRow.to_dict`).
     """
     submission = Path(submission)
     dataset_dir = Path(dataset_dir)
@@ -113,33 +111,28 @@ def score(submission, dataset_dir, out_dir=None, rate_hz=None) -> tuple[Path, li
                     run = ScoringRun(method=attrs["method"], recording=e.rel, scene=e.scene, white=white,
                                      absolute_scale=attrs["absolute_scale"], image_frame=idx.size // 2)
                     res = score_frames(rec, idx, (ds[i] for i in range(ds.shape[0])), run)
-                row = {"method": attrs["method"], "label": attrs["label"], "sensors": attrs["sensors"],
-                       "scene": e.scene, "sequence": e.sequence, "lux": e.lux, "recording": e.rel,
-                       "speed_factor": e.speed_factor, "image_speed_px_s": e.image_speed_px_s,
-                       "psnr_db": res["psnr_db"], "ssim": res["ssim"], **star_figures(None),
-                       "bandwidth_khz_per_pixel": attrs["bandwidth_khz_per_pixel"],
-                       "bandwidth_bits_per_pixel_s": attrs["bandwidth_bits_per_pixel_s"],
-                       "absolute_scale": attrs["absolute_scale"], "n_frames": res["n_frames"],
-                       "runtime_s": float("nan"), "white_point_ph_s_m2": white, "image": "", "error": ""}
+                row = ResultRow.for_recording(
+                    attrs["method"], e, label=attrs["label"], sensors=attrs["sensors"], psnr_db=res["psnr_db"],
+                    ssim=res["ssim"], bandwidth_khz_per_pixel=attrs["bandwidth_khz_per_pixel"],
+                    bandwidth_bits_per_pixel_s=attrs["bandwidth_bits_per_pixel_s"],
+                    absolute_scale=attrs["absolute_scale"], n_frames=res["n_frames"], white_point_ph_s_m2=white)
                 if res["mtf"] is not None:
-                    row.update(star_figures(res["mtf"]))
+                    row.update(**star_figures(res["mtf"]))
                     mtf_rows.extend({"method": attrs["method"], "recording": e.rel, "freq_cyc_px": float(a),
                                      "mtf": float(b)} for a, b in zip(*res["mtf"]))
                 if res["images"] is not None:
-                    row["image"] = write_images(tmp, e.key, attrs["method"], res["images"])
+                    row.image = write_images(tmp, e.key, attrs["method"], res["images"])
                 rows.append(row)
                 frame_rows.extend(res["frame_rows"])
             missing = [e.rel for e in entries if e.rel not in {p[1].rel for p in parts}]
-            meta = {"format": "simspad-results", "format_version": 1, "simspad_version": __version__,
-                    "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                    "kind": "score", "submission": str(submission), "target": str(dataset_dir),
+            meta = {"submission": str(submission), "target": str(dataset_dir),
                     "rate_hz": rate_hz, "methods": [attrs["method"]], "submission_attrs": attrs,
                     "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
                                     "lux": e.lux, "speed_factor": e.speed_factor,
                                     "image_speed_px_s": e.image_speed_px_s, **e.about} for _, e, _ in parts],
                     "missing_recordings": missing, "protocol": protocol_metadata(),
                     "dataset": {k: (manifest or {}).get(k) for k in ("name", "spec_hash", "seed")}}
-            write_results_dir(tmp, rows, frame_rows, mtf_rows, meta)
+            write_results_dir(tmp, "score", rows, frame_rows, mtf_rows, meta)
     finally:
         h5.close()
-    return out_dir, rows
+    return out_dir, [r.to_dict() for r in rows]

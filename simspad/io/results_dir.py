@@ -3,7 +3,7 @@
 Layout (one directory per run; each file written whole under a temporary name, then moved in; files that
 another command or the user put there are kept: :mod:`simspad.io.output_dirs`)::
 
-    results.csv        one row per method × recording (columns RESULT_COLUMNS)
+    results.csv        one row per method × recording (columns RESULT_COLUMNS: the fields of ResultRow)
     frames.csv         per-frame detail (FRAME_COLUMNS)
     mtf.csv            MTF curves of Siemens-star recordings (MTF_COLUMNS), when any
     results.json       metadata: version, time, target, evaluation rate, protocol constants, rows
@@ -25,21 +25,109 @@ import json
 import math
 import os
 import re
+from dataclasses import dataclass, fields
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-from simspad import defaults
+from simspad import __version__, defaults
 from simspad.errors import InputError
 from simspad.io.csv_cells import csv_safe, csv_unescape
 from simspad.io.output_dirs import claim_output_dir
 from simspad.io.safe_paths import confined_path
 
-RESULT_COLUMNS = ("method", "label", "sensors", "scene", "sequence", "lux", "recording", "speed_factor",
-                  "image_speed_px_s", "psnr_db", "ssim", "mtf_at_0p25_cyc_px", "mtf_at_0p40_cyc_px",
-                  "mtf50_cyc_px", "bandwidth_khz_per_pixel", "bandwidth_bits_per_pixel_s", "absolute_scale",
-                  "n_frames", "runtime_s", "white_point_ph_s_m2", "image", "error", "params")
+_NAN = float("nan")
+
+
+@dataclass
+class ResultRow:
+    """One row of ``results.csv``: one method scored on one recording (docs/format.md, results section).
+
+    The fields are the columns, in their order (:data:`RESULT_COLUMNS`). ``simspad evaluate`` and ``simspad score``
+    start a row with :meth:`for_recording` and fill in what the run measured (:meth:`update`); a metric the run
+    did not measure stays NaN.
+
+    Attributes
+    ----------
+    method, label, sensors : str
+        Method id, display name, sensor letters (``S+E``...).
+    scene, sequence, recording : str
+        What was scored (``recording`` relative to the dataset).
+    lux : float
+        The recording's illuminance, lx.
+    speed_factor, image_speed_px_s : float
+        The recording's retiming factor and median image speed, px s⁻¹.
+    psnr_db, ssim : float
+        Means over the evaluated instants.
+    mtf_at_0p25_cyc_px, mtf_at_0p40_cyc_px, mtf50_cyc_px : float
+        Siemens-star figures (cycles per pixel for MTF50).
+    bandwidth_khz_per_pixel, bandwidth_bits_per_pixel_s : float
+        The method's readouts per pixel per second / 1000, bits per pixel per second.
+    absolute_scale : bool
+        Scored as is (True) or after a per-frame affine fit in log space.
+    n_frames : int
+        Instants scored.
+    runtime_s : float
+        Wall time of the method, s.
+    white_point_ph_s_m2 : float
+        The sequence's white point, ph s⁻¹ m⁻².
+    image, error : str
+        Comparison image (relative path), error message of a failed run.
+    params : str or None
+        The method's parameters as compact JSON ("" for the defaults); None where the run has none to state (a
+        submission): the CSV cell is empty either way, ``results.json`` holds null.
+    """
+
+    method: str
+    label: str
+    sensors: str
+    scene: str
+    sequence: str
+    lux: float
+    recording: str
+    speed_factor: float
+    image_speed_px_s: float
+    psnr_db: float = _NAN
+    ssim: float = _NAN
+    mtf_at_0p25_cyc_px: float = _NAN
+    mtf_at_0p40_cyc_px: float = _NAN
+    mtf50_cyc_px: float = _NAN
+    bandwidth_khz_per_pixel: float = _NAN
+    bandwidth_bits_per_pixel_s: float = _NAN
+    absolute_scale: bool = True
+    n_frames: int = 0
+    runtime_s: float = _NAN
+    white_point_ph_s_m2: float = _NAN
+    image: str = ""
+    error: str = ""
+    params: str | None = None
+
+    @classmethod
+    def for_recording(cls, method: str, entry, **columns) -> "ResultRow":
+        """A row of ``method`` on the recording ``entry`` (a :class:`simspad.evaluate.recordings.RecordingEntry`:
+        its ``scene``, ``sequence``, ``lux``, ``rel``, ``speed_factor`` and ``image_speed_px_s``); the label is
+        the method id until ``columns`` (any other column) say otherwise."""
+        return cls(method=method, label=columns.pop("label", method), sensors=columns.pop("sensors", ""),
+                   scene=entry.scene, sequence=entry.sequence, lux=entry.lux, recording=entry.rel,
+                   speed_factor=entry.speed_factor, image_speed_px_s=entry.image_speed_px_s, **columns)
+
+    def update(self, **columns) -> None:
+        """Set columns by name (TypeError for a name that is not a column)."""
+        for name, value in columns.items():
+            if name not in _COLUMN_SET:
+                raise TypeError(f"results.csv has no column {name!r}")
+            setattr(self, name, value)
+
+    def to_dict(self) -> dict:
+        """The row as ``{column: value}``, in column order."""
+        return {c: getattr(self, c) for c in RESULT_COLUMNS}
+
+
+#: The columns of ``results.csv``, in order: the fields of :class:`ResultRow`.
+RESULT_COLUMNS = tuple(f.name for f in fields(ResultRow))
+_COLUMN_SET = frozenset(RESULT_COLUMNS)
 FRAME_COLUMNS = ("method", "recording", "frame", "t_s", "psnr_db", "ssim", "fit_a", "fit_b")
 MTF_COLUMNS = ("method", "recording", "freq_cyc_px", "mtf")
 CROP_PX = 256
@@ -138,17 +226,25 @@ def write_images(work_dir: Path, key: str, method: str, images) -> str:
     return (d / f"{name}_vs_gt.png").relative_to(work_dir).as_posix()
 
 
-def write_results_dir(tmp: Path, rows: list[dict], frame_rows: list[dict], mtf_rows: list[dict], meta: dict) -> None:
-    """Write the tables and the metadata of a results directory into ``tmp`` (images are written by callers)."""
+def write_results_dir(tmp: Path, kind: str, rows: list[ResultRow], frame_rows: list[dict], mtf_rows: list[dict],
+                      meta: dict) -> None:
+    """Write the tables and ``results.json`` of a results directory into ``tmp`` (images are written by callers).
+
+    ``results.json`` is built here alone: the header every results folder shares (``format``, ``format_version``,
+    ``simspad_version``, ``created_utc`` taken once, here, and ``kind``: ``"evaluate"`` or ``"score"``), then the
+    command's own ``meta``, then ``results``, the rows (NaN as null).
+    """
     tmp.mkdir(parents=True, exist_ok=True)
-    write_csv(tmp / "results.csv", RESULT_COLUMNS, rows)
+    dicts = [r.to_dict() for r in rows]
+    write_csv(tmp / "results.csv", RESULT_COLUMNS, dicts)
     write_csv(tmp / "frames.csv", FRAME_COLUMNS, frame_rows)
     if mtf_rows:
         write_csv(tmp / "mtf.csv", MTF_COLUMNS, mtf_rows)
-    meta = dict(meta)
-    meta["results"] = [{c: (None if isinstance(r.get(c), float) and math.isnan(r.get(c)) else r.get(c))
-                        for c in RESULT_COLUMNS} for r in rows]
-    (tmp / "results.json").write_text(json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n",
+    doc = {"format": "simspad-results", "format_version": 1, "simspad_version": __version__,
+           "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "kind": kind, **meta}
+    doc["results"] = [{c: (None if isinstance(v, float) and math.isnan(v) else v) for c, v in r.items()}
+                      for r in dicts]
+    (tmp / "results.json").write_text(json.dumps(doc, indent=2, sort_keys=True, default=str) + "\n",
                                       encoding="utf-8")
 
 

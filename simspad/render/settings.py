@@ -1,7 +1,8 @@
 """What a render is asked for: its time span, image size, sampling, keyframe-schedule limits and seed.
 
 :class:`RenderSettings` is the one record :func:`simspad.render.renderer.render_sequence` takes for them;
-:meth:`RenderSettings.checked_size` validates every field before anything is written.
+:meth:`RenderSettings.problems` is the one check of each field (a dataset spec's sequences are checked by it too);
+:meth:`RenderSettings.checked_size` raises the first problem before anything is written.
 """
 
 from __future__ import annotations
@@ -115,34 +116,44 @@ class RenderSettings:
         Raises
         ------
         SimSpadError
-            The first bad field, named.
+            The first bad field (:meth:`problems`), named.
+        """
+        for field_name, message in self.problems():
+            raise SimSpadError(message, field=field_name)
+        return int(self.resolution[0]), int(self.resolution[1])
+
+    def problems(self) -> list[tuple[str, str]]:
+        """(field, message) for every field that breaks its rule, in field order (empty: all fine).
+
+        The one check of each field, whoever sets it: a dataset spec's sequences report all of them at once
+        (``duration`` and ``start`` stand for ``duration_s`` and ``start_s``); :meth:`checked_size` raises the
+        first. The resource bounds (:func:`render_limit_problems`) are checked once the size fields are valid.
         """
         duration_s, start_s, resolution, spp = self.duration_s, self.start_s, self.resolution, self.spp
         max_flow_px, min_rate_hz, seed = self.max_flow_px, self.min_rate_hz, self.seed
+        out: list[tuple[str, str]] = []
 
         def bad(field_name, message):
-            raise SimSpadError(message, field=field_name)
+            out.append((field_name, message))
 
-        if not (isinstance(duration_s, numbers.Real) and math.isfinite(duration_s) and duration_s > 0):
+        if not (_is_real(duration_s) and math.isfinite(duration_s) and duration_s > 0):
             bad("duration", f"must be a number of seconds > 0, got {duration_s!r}")
-        if not (isinstance(start_s, numbers.Real) and math.isfinite(start_s)):
+        if not (_is_real(start_s) and math.isfinite(start_s)):
             bad("start", f"must be a finite number of seconds, got {start_s!r}")
-        try:
-            width, height = (int(v) for v in resolution)
-        except (TypeError, ValueError):
-            bad("resolution", f"expected (width, height), got {resolution!r}")
-        if width <= 0 or height <= 0:
-            bad("resolution", f"width and height must be positive, got {resolution!r}")
-        if not (isinstance(spp, numbers.Integral) and spp >= 1):
-            bad("spp", f"must be an integer >= 1, got {spp!r}")
-        if not (max_flow_px > 0):
-            bad("max_flow_px", f"must be > 0 pixels, got {max_flow_px!r}")
-        if not (min_rate_hz > 0 and math.isfinite(min_rate_hz)):
+        problem = resolution_problem(resolution)
+        if problem:
+            bad("resolution", problem)
+        if not (isinstance(spp, numbers.Integral) and not isinstance(spp, bool) and spp >= 1):
+            bad("spp", f"must be an integer > 0 (samples per pixel), got {spp!r}")
+        if not (_is_real(max_flow_px) and max_flow_px > 0):
+            bad("max_flow_px", f"must be a number of pixels > 0, got {max_flow_px!r}")
+        if not (_is_real(min_rate_hz) and min_rate_hz > 0 and math.isfinite(min_rate_hz)):
             bad("min_rate_hz", f"must be a finite number of Hz > 0, got {min_rate_hz!r}")
         if not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**64:
             bad("seed", f"must be an integer in [0, 2**64), got {seed!r}")
-        for field_name, message in render_limit_problems(width, height, spp, max_flow_px, min_rate_hz, duration_s):
-            bad(field_name, message)
+        if not out:
+            width, height = (int(v) for v in resolution)
+            out += render_limit_problems(width, height, spp, max_flow_px, min_rate_hz, duration_s)
         if self.interpolation not in INTERPOLATIONS:
             bad("interpolation", f"must be one of {', '.join(INTERPOLATIONS)}, got {self.interpolation!r}")
         if not (isinstance(self.warp_stride, numbers.Integral) and self.warp_stride >= 1):
@@ -152,8 +163,7 @@ class RenderSettings:
         if not isinstance(self.warp_emission, bool):
             bad("warp_emission", f"must be true or false, got {self.warp_emission!r}")
         rate = self.gt_rate_hz
-        if rate is not None and not (isinstance(rate, numbers.Real) and not isinstance(rate, bool)
-                                     and math.isfinite(rate) and rate > 0):
+        if rate is not None and not (_is_real(rate) and math.isfinite(rate) and rate > 0):
             bad("gt_rate_hz", f"must be a finite number of Hz > 0, got {rate!r}")
         if self.convergence not in CONVERGENCE_MODES:
             bad("convergence", f"must be one of {', '.join(CONVERGENCE_MODES)}, got {self.convergence!r}")
@@ -166,7 +176,28 @@ class RenderSettings:
             bad("cache_cell_px", f"must be a number of pixels in [0.25, 64], got {self.cache_cell_px!r}")
         if not (isinstance(self.cache_probes, numbers.Integral) and 1 <= self.cache_probes <= 256):
             bad("cache_probes", f"must be an integer in [1, 256], got {self.cache_probes!r}")
-        return width, height
+        return out
+
+
+def _is_real(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def resolution_problem(resolution) -> str | None:
+    """What is wrong with an image size, or None: the one rule for a resolution, wherever it is given (a dataset
+    spec's ``resolution``, ``simspad render --resolution``, :class:`RenderSettings`).
+
+    Parameters
+    ----------
+    resolution : sequence
+        (width, height) in pixels: two integers > 0.
+    """
+    try:
+        ok = len(resolution) == 2 and all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and v > 0
+                                          for v in resolution)
+    except TypeError:
+        ok = False
+    return None if ok else f"got {resolution!r} (expected two positive integers [W, H])"
 
 
 def limits_ignored() -> bool:

@@ -5,66 +5,36 @@ irradiance so that the first keyframe's mean luminance corresponds to the lux le
 requested sensor on ``[start_s, start_s + duration_s]``, in the order of the sensor table
 (:mod:`simspad.sensors.registry`, whose rows give each kind's checks and simulator), with its own random stream
 ``child_rng(seed, *stream_key, kind)``; write the ground truth; all inside one
-:class:`~simspad.io.recording.RecordingWriter`, so a failure anywhere leaves no file behind.
+:class:`~simspad.io.recording.RecordingWriter`, so a failure anywhere leaves no file behind. What to simulate comes
+as one :class:`~simspad.sensors.recording_settings.RecordingSettings` (re-exported here), whose lux level was
+checked when it was built.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from simspad import __version__, defaults
+from simspad import __version__
 from simspad.errors import SimSpadError
 from simspad.io.provenance import created_utc
 from simspad.io.recording import RecordingWriter
-from simspad.physics.radiometry import Optics
 from simspad.physics.seeding import child_rng
 from simspad.radiance.timeline import Timeline
 from simspad.sensors.ground_truth import write_ground_truth
 from simspad.sensors.presets import params_to_attrs
+from simspad.sensors.recording_settings import RecordingSettings
 from simspad.sensors.registry import ordered
 from simspad.sensors.render_noise import render_noise_attrs
 from simspad.sensors.recording_size import check_recording_size
 
+__all__ = ["RecordingSettings", "simulate_recording"]
+
 #: Instants this close beyond the render's last keyframe are accepted (round-off of start + duration).
 _TIME_TOLERANCE_S = 1e-9
-
-
-@dataclass(frozen=True)
-class RecordingSettings:
-    """What one recording simulates: light level, sensors, interval, random stream, ground truth and optics.
-
-    Attributes
-    ----------
-    lux : float
-        Scene illuminance, lx (> 0).
-    sensors : dict
-        ``{kind: params}`` with kind a row of the sensor table (``"spad"``, ``"frames"``, ``"events"``, …) and
-        the parameter dataclass of :func:`simspad.sensors.presets.sensor_params`.
-    start_s, duration_s : float, optional
-        Interval to simulate, s; default from the first to the last keyframe.
-    seed : int or SeedSequence
-        Dataset seed; each sensor draws from ``child_rng(seed, *stream_key, kind)``.
-    stream_key : tuple
-        Stable key of this recording (e.g. ``(sequence, lux)``).
-    gt_rate_hz : float
-        Ground-truth frame rate, Hz.
-    optics : Optics, optional
-        Lens and illuminant (default ``Optics()``).
-    """
-
-    lux: float
-    sensors: dict
-    start_s: float | None = None
-    duration_s: float | None = None
-    seed: int | np.random.SeedSequence = 0
-    stream_key: tuple = ()
-    gt_rate_hz: float = defaults.GT_RATE_HZ
-    optics: Optics | None = None
 
 
 def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, metadata: dict | None = None,
@@ -97,17 +67,12 @@ def simulate_recording(render_dir, out_path, settings: RecordingSettings, *, met
     Raises
     ------
     SimSpadError
-        Bad lux, interval, sensor kind or parameter; InputError for a malformed render directory.
+        Bad interval, sensor kind or parameter (the lux level was checked by ``settings``); InputError for a
+        malformed render directory.
     """
     lux, sensors, seed, stream_key = settings.lux, settings.sensors, settings.seed, settings.stream_key
-    if not (isinstance(lux, (int, float)) and math.isfinite(lux) and lux > 0):
-        raise SimSpadError(f"must be a finite number > 0, got {lux!r}", field="lux")
-    if not defaults.LUX_RANGE[0] <= lux <= defaults.LUX_RANGE[1]:
-        raise SimSpadError(f"{lux:g} lx is outside {defaults.LUX_RANGE[0]:g}–{defaults.LUX_RANGE[1]:g} lx (such a level "
-                           "gives NaN or all-zero images)", field="lux")
     rows = ordered(sensors)  # unknown kinds refused here
-    optics = settings.optics or Optics()
-    settings = replace(settings, optics=optics)
+    optics = settings.optics
     out_path = Path(out_path)
     tl = Timeline.open(render_dir)
     for row, params in rows:  # every model check before anything is written (one message naming the field)
@@ -156,7 +121,7 @@ def _interval(tl: Timeline, start_s, duration_s, render_dir) -> tuple[float, flo
 
 
 def _root_attrs(tl: Timeline, render_dir, settings: RecordingSettings, *, t0, t1, flux_scale, metadata) -> dict:
-    """Root attributes of the recording; ``settings.optics`` already resolved (not None)."""
+    """Root attributes of the recording."""
     lux, sensors, seed, stream_key = settings.lux, settings.sensors, settings.seed, settings.stream_key
     gt_rate_hz, optics = settings.gt_rate_hz, settings.optics
     meta = dict(metadata or {})

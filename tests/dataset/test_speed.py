@@ -97,7 +97,7 @@ def test_each_speed_gets_its_own_render_names_and_seeds(tmp_path):
     fast = [r for r in both.recordings if r.speed_factor == 8.0]
     assert [r.rel_path for r in fast[:2]] == ["recordings/office/office_x8_10lx.h5",
                                               "recordings/office/office_x8_100lx.h5"]
-    assert fast[0].stream_key == ("office", 10.0, "speed", 8.0)
+    assert fast[0].settings.stream_key == ("office", 10.0, "speed", 8.0)
     assert dict(fast[0].metadata)["speed_factor"] == 8.0
     fast_render = next(r for r in both.renders if r.rel_dir == fast[0].render_rel_dir)
     base_render = both.renders[0]
