@@ -49,8 +49,8 @@ class RecordingSettings:
     lux : float
         Scene illuminance, lx, checked on construction (:func:`lux_problem`; SimSpadError naming ``lux``).
     sensors : dict
-        ``{kind: params}`` with kind in ``"spad"``, ``"frames"``, ``"events"`` and the parameter dataclass of
-        :func:`simspad.sensors.presets.sensor_params`.
+        ``{kind: params}`` with kind a row of the sensor table (``"spad"``, ``"frames"``, ``"events"``, …) and
+        the parameter dataclass of :func:`simspad.sensors.presets.sensor_params`.
     start_s, duration_s : float, optional
         Interval to simulate, s; default from the first to the last keyframe.
     seed : int or SeedSequence
