@@ -35,10 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
+from simspad.render.flow import object_poses
 from simspad.render.mitsuba_scene import psf_blur
 
-#: Cell sizes tried by a lookup, in multiples of the finest cell, finest first.
-LEVELS = (1, 4, 16)
+#: Cell sizes tried by a lookup, in multiples of the finest cell, finest first. The coarsest (256 finest cells:
+#: a room at the probe views' depth) catches the few glossy-chain vertices no probe view saw, which would each
+#: cost an irradiance estimate of their own (a kernel launch per keyframe: more than the rest of a small one).
+LEVELS = (1, 4, 16, 64, 256)
 #: Normal bins: the dominant axis and its sign (6 bins).
 N_NORMAL_BINS = 6
 #: Chain vertices followed per camera sample (the first hit plus glossy/specular bounces).
@@ -332,15 +335,21 @@ class ConvergedRenderer:
         ray = self._camera_rays(pos)
         emitted, vertices = self.trace_chain(ray, seed)
         total = emitted
-        for k, v in enumerate(vertices):
+        qs, misses = [], []
+        for v in vertices:
             p_rest = self.rest_points(v, object_poses)
             n_rest = self.rest_normals(v, object_poses)
             q, found = (cache.lookup(p_rest, n_rest, v["obj"]) if cache is not None
                         else (np.zeros((v["idx"].size, 3)), np.zeros(v["idx"].size, dtype=bool)))
-            miss = np.nonzero(~found)[0]
-            if miss.size:
-                q[miss] = self.estimate_q(v["ro"][miss], v["rd"][miss], self.fallback_samples,
-                                          _mix(seed, 1000 + k))
+            qs.append(q)
+            misses.append(np.nonzero(~found)[0])
+        if any(m.size for m in misses):  # one estimate for the vertices of every depth that no cell covers
+            est = self.estimate_q(np.concatenate([v["ro"][m] for v, m in zip(vertices, misses)]),
+                                  np.concatenate([v["rd"][m] for v, m in zip(vertices, misses)]),
+                                  self.fallback_samples, _mix(seed, 1000))
+            for q, m in zip(qs, misses):
+                q[m], est = est[:m.size], est[m.size:]
+        for v, q in zip(vertices, qs):
             np.add.at(total, v["idx"], v["weight"] * q)
         h, w = self.ms.height, self.ms.width
         rgb = total.reshape(h, w, self.spp, 3).mean(axis=2).astype(np.float32)
@@ -469,3 +478,36 @@ def load_cache(path) -> IrradianceCache | None:
     except (OSError, KeyError, ValueError):
         return None
     return cache
+
+
+def plan_convergence(plan) -> dict | None:
+    """The ``renderer.convergence`` fields of a render plan's timeline (None: a path-traced render)."""
+    return plan.timeline.get("renderer", {}).get("convergence") or None
+
+
+def converged_renderer(plan, ms, ts, out_dir) -> tuple[ConvergedRenderer, IrradianceCache]:
+    """The :class:`ConvergedRenderer` of a converged render ``plan`` and its cache: read from the render directory
+    ``out_dir``, or built from the plan's probe keyframes (the same values in any process) and written there."""
+    fields = plan_convergence(plan)
+    cr = ConvergedRenderer(ms, plan.spp)
+    path = Path(out_dir) / fields["cache_file"]
+    cache = load_cache(path) if path.is_file() else None
+    if cache is None:
+        poses = [(np.asarray(plan.camera_to_world[i]),
+                  {k: np.asarray(m) for k, m in plan.objects_to_world[i].items()} if plan.objects_to_world
+                  else object_poses(ts, plan.times_s[i]))
+                 for i in probe_indices(plan.n_keyframes, fields["cache_probes"])]
+        cache = build_cache(cr, poses, plan.seed, fields["cache_samples"], fields["cache_cell_px"])
+        save_cache(cache, path)
+    return cr, cache
+
+
+def plan_radiance(plan, ms, ts, out_dir):
+    """The radiance pass of ``plan``'s keyframes, as ``radiance(seed, objects) -> [H, W, 3]`` at the scene's
+    current pose (``objects``: the animated objects' poses by name, as posed): None for a path-traced render (the
+    caller uses ``ms.render_radiance(seed)``); for a converged one its cache's render (:func:`converged_renderer`:
+    the cache is read or built now, before the caller poses the scene, since building it poses the probe views)."""
+    if plan_convergence(plan) is None:
+        return None
+    cr, cache = converged_renderer(plan, ms, ts, out_dir)
+    return lambda seed, objects: cr.render(cache, seed, objects)

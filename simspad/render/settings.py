@@ -157,8 +157,6 @@ class RenderSettings:
             bad("gt_rate_hz", f"must be a finite number of Hz > 0, got {rate!r}")
         if self.convergence not in CONVERGENCE_MODES:
             bad("convergence", f"must be one of {', '.join(CONVERGENCE_MODES)}, got {self.convergence!r}")
-        if self.convergence != "off" and self.interpolation == "warp":
-            bad("convergence", "a converged render renders every keyframe: use it with interpolation linear")
         if not (isinstance(self.cache_samples, numbers.Integral) and 1 <= self.cache_samples <= 65536):
             bad("cache_samples", f"must be an integer in [1, 65536], got {self.cache_samples!r}")
         if not (isinstance(self.cache_cell_px, numbers.Real) and math.isfinite(self.cache_cell_px)

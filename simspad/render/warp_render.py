@@ -32,6 +32,7 @@ from simspad.io.exr import read_exr, write_exr
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.noise_budget import PROBE_SEED_OFFSET
+from simspad.render.converged import plan_radiance
 from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction, tiles_of_blocks
 from simspad.render.flow import object_poses
 from simspad.render.keyframe_files import frame_key, frame_names, write_frame
@@ -131,8 +132,11 @@ def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, ou
     path = out_dir / noise_probe_name(plan)
     if path.is_file():
         return False
-    ms.set_pose(np.asarray(plan.camera_to_world[0]), _probe_objects(ts, plan))
-    rgb = ms.render_radiance(plan.seed + PROBE_SEED_OFFSET)
+    radiance = plan_radiance(plan, ms, ts, out_dir)  # (before posing: a converged render's cache poses probes)
+    objects = _probe_objects(ts, plan)
+    ms.set_pose(np.asarray(plan.camera_to_world[0]), objects)
+    seed = plan.seed + PROBE_SEED_OFFSET
+    rgb = ms.render_radiance(seed) if radiance is None else radiance(seed, objects)
     write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
     return True
 
@@ -160,6 +164,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
     noise map is computed from keyframe 0's file and the probe's, so every chunk decides with the same numbers.
     """
     times, cam_poses, seed = np.asarray(plan.times_s), np.asarray(plan.camera_to_world), plan.seed
+    radiance = plan_radiance(plan, ms, ts, out_dir)  # a converged render's cache (None: path tracing)
     stride, threshold = plan.warp["stride"], plan.warp["threshold"]
     with_emission = bool(plan.warp.get("emission_layer", False))
     render_names = plan.names  # a plan's names are those of rendered keyframes until the warp results replace them
@@ -204,7 +209,7 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
                               emission(i))
         tic = time.perf_counter()
         ms.set_pose(*pose_at(i))
-        rgb = ms.render_radiance(seed)
+        rgb = ms.render_radiance(seed) if radiance is None else radiance(seed, pose_at(i)[1])
         depth, object_id = ms.render_depth_ids(seed)
         write_frame(path, rgb, depth, object_id)
         frame_times.append(time.perf_counter() - tic)
@@ -248,13 +253,16 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
                 key0 = np.maximum(key0 - key0_emission, 0.0)
                 probe = np.maximum(probe - ms.render_emission(seed + PROBE_SEED_OFFSET), 0.0)
         noise_y, noise = noise_map(key0, probe)
-    patcher = BlockPatcher(ms, pose_at, seed, lambda i: (out_dir / warp_names[i]).is_file())
+    # Blocks are path-traced: a converged render re-renders whole keyframes where the warps disagree.
+    patcher = (BlockPatcher(ms, pose_at, seed, lambda i: (out_dir / warp_names[i]).is_file()) if radiance is None
+               else None)
     plan = synthesize_keyframes(camera, times, render, lambda i: (cam_poses[i], poses_of(i)), write,
                                 stride=stride, threshold=threshold, noise_y=noise_y, geometry=geometry,
                                 emission=target_emission if with_emission else None,
                                 on_keyframe=lambda i: bar.update(1), patch=patcher, anchors=anchors)
     return WarpedFrames(names, plan, frame_times, compiled, reused[0], time.perf_counter() - tic, stride, threshold,
-                        noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks, patcher.seconds,
+                        noise, len(geometry_times), float(sum(geometry_times)), patcher.n_blocks if patcher else 0,
+                        patcher.seconds if patcher else 0.0,
                         sorted(emitting | plan.emission_passes), probe_emission)
 
 

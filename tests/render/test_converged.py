@@ -60,10 +60,10 @@ def test_bad_convergence_settings_are_refused(field, value):
     assert err.value.field == field
 
 
-def test_convergence_needs_linear_interpolation():
-    with pytest.raises(SimSpadError) as err:
-        RenderSettings(duration_s=0.01, convergence="cache", interpolation="warp").checked_size()
-    assert err.value.field == "convergence"
+def test_convergence_works_with_either_interpolation():
+    for interpolation in ("linear", "warp"):
+        assert RenderSettings(duration_s=0.01, resolution=(16, 12), convergence="cache",
+                              interpolation=interpolation).checked_size() == (16, 12)
 
 
 def _luminance_frames(out):
@@ -91,6 +91,10 @@ def test_converged_office_is_closer_to_the_reference_than_brute_force(tmp_path):
     err_cv = np.median(np.abs(cv[ok] - ref[ok]) / ref[ok])
     err_bf = np.median(np.abs(bf[ok] - ref[ok]) / ref[ok])
     assert err_cv < 0.12 and err_bf > 3 * err_cv, (err_cv, err_bf)
+    # The render-noise budget's probe is a converged render too (the same cache, the next seed): its noise is the
+    # per-pixel part only, a fraction of the path tracer's at the same rays per pixel.
+    noise_cv, noise_bf = (tl["render_noise"]["relative_noise_median"] for tl in (cv_tl, bf_tl))
+    assert noise_cv < noise_bf / 3, (noise_cv, noise_bf)
     # Recorded: the mode and its knobs; the cache file it names is there; other names than a path-traced render.
     conv = cv_tl["renderer"]["convergence"]
     assert conv["mode"] == "cache" and conv["cache_samples"] == 256 and (out / conv["cache_file"]).is_file()
@@ -99,6 +103,36 @@ def test_converged_office_is_closer_to_the_reference_than_brute_force(tmp_path):
     # Deterministic: a second render (cache rebuilt in a fresh directory) gives the same pixels.
     _, again = _luminance_frames(_render(tmp_path / "again", cv_settings))
     np.testing.assert_array_equal(again, cv)
+
+
+@pytest.mark.slow
+def test_converged_warp_render_synthesizes_from_converged_keyframes(tmp_path):
+    """Warp with the cache: the anchors and the noise probe are cache renders (the warps are judged against the
+    cache's noise), keyframes between are synthesized, and the whole timeline stays as close to a 1024-spp
+    path-traced reference of the same keyframes as the all-rendered converged timeline."""
+    common = dict(duration_s=0.006, resolution=(24, 18), warp_stride=2)
+    _, ref = _luminance_frames(_render(tmp_path / "ref", RenderSettings(**common, spp=1024)))
+    lin_tl, lin = _luminance_frames(_render(tmp_path / "lin", RenderSettings(**common, spp=16, convergence="cache",
+                                                                                 cache_samples=256)))
+    out = _render(tmp_path / "warp", RenderSettings(**common, spp=16, convergence="cache", cache_samples=256,
+                                                    interpolation="warp"))
+    warp_tl, warp = _luminance_frames(out)
+    sources = [k["source"] for k in warp_tl["keyframes"]]
+    assert warp_tl["schedule"]["interpolation"] == "warp" and "warp" in sources and sources[0] == "render"
+    assert warp_tl["schedule"]["warp"]["emission_layer"] is False  # the emission pass is path-traced: not mixed in
+    # Rendered keyframes are the linear converged render's own files (same names, same pixels).
+    lin_files = [k["file"] for k in lin_tl["keyframes"]]
+    for i, kf in enumerate(warp_tl["keyframes"]):
+        if kf["source"] == "render":
+            assert kf["file"] == lin_files[i]
+            np.testing.assert_array_equal(warp[i], lin[i])
+    # The probe the warps were judged against is a cache render: the noise they saw is the cache's, not 16-spp
+    # path tracing's (tens of %).
+    assert warp_tl["schedule"]["warp"]["render_noise"] < 0.15
+    ok = ref > 0
+    err_warp = np.median(np.abs(warp[ok] - ref[ok]) / ref[ok])
+    err_lin = np.median(np.abs(lin[ok] - ref[ok]) / ref[ok])
+    assert err_warp < 0.12 and err_warp < 1.2 * err_lin, (err_warp, err_lin)
 
 
 def _render(out, settings):
