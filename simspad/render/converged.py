@@ -131,15 +131,20 @@ class IrradianceCache:
             c = p[todo] / h - 0.5
             base = np.floor(c).astype(np.int64)
             frac = c - base
+            # The camera rays of a keyframe fall many to a cell: the 8 corner cells are searched once per distinct
+            # (base cell, normal bin, object), and each point gathers their values.
+            _, first, inv = np.unique(_hash(base, nb[todo], obj[todo], level), return_index=True,
+                                      return_inverse=True)
+            ubase, unb, uobj = base[first], nb[todo][first], obj[todo][first]
             acc = np.zeros((todo.size, 3))
             wsum = np.zeros(todo.size)
             for corner in range(8):
                 off = np.array([(corner >> k) & 1 for k in range(3)], dtype=np.int64)
-                key = _hash(base + off, nb[todo], obj[todo], level)
+                key = _hash(ubase + off, unb, uobj, level)
                 slot = np.clip(np.searchsorted(keys, key), 0, keys.size - 1)
                 hit = (keys[slot] == key) & (counts[slot] >= min_count)
-                w = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1) * hit
-                acc += w[:, None] * values[slot]
+                w = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1) * hit[inv]
+                acc += w[:, None] * values[slot[inv]]
                 wsum += w
             ok = wsum > 1e-6
             out[todo[ok]] = acc[ok] / wsum[ok, None]
