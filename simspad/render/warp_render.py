@@ -132,11 +132,8 @@ def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, ou
     path = out_dir / noise_probe_name(plan)
     if path.is_file():
         return False
-    radiance = plan_radiance(plan, ms, ts, out_dir)  # (before posing: a converged render's cache poses probes)
-    objects = _probe_objects(ts, plan)
-    ms.set_pose(np.asarray(plan.camera_to_world[0]), objects)
-    seed = plan.seed + PROBE_SEED_OFFSET
-    rgb = ms.render_radiance(seed) if radiance is None else radiance(seed, objects)
+    ms.set_pose(np.asarray(plan.camera_to_world[0]), _probe_objects(ts, plan))
+    rgb = ms.render_radiance(plan.seed + PROBE_SEED_OFFSET)
     write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
     return True
 
@@ -244,7 +241,12 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, plan: RenderPlan, out
         else:
             key0 = read_exr(out_dir / render_names[0])["rgb"]
         render_noise_probe(ms, ts, plan, out_dir)
-        probe = read_exr(out_dir / noise_probe_name(plan))["rgb"]
+        if radiance is None:
+            probe = read_exr(out_dir / noise_probe_name(plan))["rgb"]
+        else:  # a converged render's warps are judged against its own noise: keyframe 0 from the same cache with
+            # the next seed (kept in memory, the same in every chunk; the probe file stays path-traced: the budget's)
+            ms.set_pose(*pose_at(0))
+            probe = radiance(seed + PROBE_SEED_OFFSET, pose_at(0)[1])
         if with_emission:
             ms.set_pose(*pose_at(0))
             key0_emission = ready[0].emission if first == 0 else emission(0)

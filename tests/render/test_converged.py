@@ -91,10 +91,7 @@ def test_converged_office_is_closer_to_the_reference_than_brute_force(tmp_path):
     err_cv = np.median(np.abs(cv[ok] - ref[ok]) / ref[ok])
     err_bf = np.median(np.abs(bf[ok] - ref[ok]) / ref[ok])
     assert err_cv < 0.12 and err_bf > 3 * err_cv, (err_cv, err_bf)
-    # The render-noise budget's probe is a converged render too (the same cache, the next seed): its noise is the
-    # per-pixel part only, a fraction of the path tracer's at the same rays per pixel.
-    noise_cv, noise_bf = (tl["render_noise"]["relative_noise_median"] for tl in (cv_tl, bf_tl))
-    assert noise_cv < noise_bf / 3, (noise_cv, noise_bf)
+
     # Recorded: the mode and its knobs; the cache file it names is there; other names than a path-traced render.
     conv = cv_tl["renderer"]["convergence"]
     assert conv["mode"] == "cache" and conv["cache_samples"] == 256 and (out / conv["cache_file"]).is_file()
@@ -126,9 +123,9 @@ def test_converged_warp_render_synthesizes_from_converged_keyframes(tmp_path):
         if kf["source"] == "render":
             assert kf["file"] == lin_files[i]
             np.testing.assert_array_equal(warp[i], lin[i])
-    # The probe the warps were judged against is a cache render: the noise they saw is the cache's, not 16-spp
-    # path tracing's (tens of %).
-    assert warp_tl["schedule"]["warp"]["render_noise"] < 0.15
+    # The warps were judged against a cache render's noise (keyframe 0 from the same cache, the next seed), not
+    # 16-spp path tracing's (tens of %), which stays the recording's budget (docs/format.md).
+    assert warp_tl["schedule"]["warp"]["render_noise"] < 0.15 < warp_tl["render_noise"]["relative_noise_rms"]
     ok = ref > 0
     err_warp = np.median(np.abs(warp[ok] - ref[ok]) / ref[ok])
     err_lin = np.median(np.abs(lin[ok] - ref[ok]) / ref[ok])
