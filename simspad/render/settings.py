@@ -38,7 +38,8 @@ DEFAULT_INTERPOLATION = "linear"
 #: camera rays, 256 estimates per probe point): office 4.9 % error, events 0.88-1.52x the reference's; plant
 #: 5.0 %, 1.11-1.16x; Siemens star 1.4 %, 1.01-1.02x; fan 1.9 %, 0.94-1.01x; 4-7x the CPU of 64-spp path tracing
 #: at that size (office 11.9 against 3.1 CPU-s, star 4.3 against 0.6).
-#: docs/rendering.md has the table and what was tried.
+#: docs/rendering.md has the table and what was tried. It works with either interpolation: with ``"warp"`` the
+#: anchors are converged keyframes and the warps are judged against a converged render's own noise.
 CONVERGENCE_MODES = ("off", "cache")
 DEFAULT_CONVERGENCE = "off"
 
