@@ -17,7 +17,8 @@ built once per sequence from probe views spread over the trajectory (:func:`buil
 those views find gets ``q_samples`` estimates of Q by next-event estimation plus a cosine-sampled path continued
 by Mitsuba's own path integrator (multiple importance sampling between the two), and each cell keeps their
 mean. A keyframe's lookup interpolates trilinearly between the cells around a point, at the finest of
-:data:`LEVELS` that has them; a vertex no cell covers gets its own Q estimate then (``fallback_samples``).
+:data:`LEVELS` that has them, else in the cells of the next-closest normal bins; a vertex no cell covers gets its
+own Q estimate then (``fallback_samples``).
 
 What stays is a per-surface bias (the cache's cell size smooths irradiance, e.g. contact shadows, over a few
 pixels) and the cache's own noise, which is fixed to the surfaces and moves with them like texture instead of
@@ -44,6 +45,8 @@ from simspad.render.mitsuba_scene import psf_blur
 LEVELS = (1, 4, 16, 64, 256)
 #: Normal bins: the dominant axis and its sign (6 bins).
 N_NORMAL_BINS = 6
+#: The normal of each bin (bin 2·axis + (1 if negative)).
+_BIN_NORMALS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
 #: Chain vertices followed per camera sample (the first hit plus glossy/specular bounces).
 CHAIN_VERTICES = 3
 #: Path length used where the scene's integrator has none (max_depth = -1: Russian roulette only).
@@ -346,8 +349,19 @@ class ConvergedRenderer:
             n_rest = self.rest_normals(v, object_poses)
             q, found = (cache.lookup(p_rest, n_rest, v["obj"]) if cache is not None
                         else (np.zeros((v["idx"].size, 3)), np.zeros(v["idx"].size, dtype=bool)))
+            miss = np.nonzero(~found)[0]
+            if miss.size and cache is not None:
+                # A vertex whose normal bin no probe saw near it (a blade's edge): the cells of the next-closest
+                # normal bins, before paying for an estimate of its own (a kernel launch per keyframe).
+                order = np.argsort(-(n_rest[miss] @ _BIN_NORMALS.T), axis=1)
+                for rank in range(1, N_NORMAL_BINS):
+                    q_alt, ok = cache.lookup(p_rest[miss], _BIN_NORMALS[order[:, rank]], v["obj"][miss])
+                    q[miss[ok]] = q_alt[ok]
+                    miss, order = miss[~ok], order[~ok]
+                    if not miss.size:
+                        break
             qs.append(q)
-            misses.append(np.nonzero(~found)[0])
+            misses.append(miss)
         if any(m.size for m in misses):  # one estimate for the vertices of every depth that no cell covers
             est = self.estimate_q(np.concatenate([v["ro"][m] for v, m in zip(vertices, misses)]),
                                   np.concatenate([v["rd"][m] for v, m in zip(vertices, misses)]),
