@@ -7,12 +7,16 @@ For each scene (its default trajectory, a short clip at a small size) it renders
   for one of them), and their mean is what the others are measured against;
 * **brute force** at each of ``--spp`` (the path tracer, ``convergence = "off"``);
 * the **irradiance cache** (``convergence = "cache"``, :mod:`simspad.render.converged`) at ``--cache-spp`` camera
-  rays per pixel and ``--cache-samples`` estimates per probe point;
+  rays per pixel and ``--cache-samples`` estimates per probe point, with each keyframe schedule of
+  ``--cache-interpolation`` (``linear``: every keyframe rendered; ``warp``: converged anchors, the rest
+  synthesized where the warps agree, ``--warp-stride`` apart);
 
 and reports for each its render CPU-seconds (the process's CPU time for the whole render, cache included), the
 median over keyframes and pixels of the relative luminance error against the reference, and the event counts of
 a noise-free event sensor (shot noise, leak and hot pixels off, the same pixel maps) at 100 and 10⁴ lx, as a
-ratio to the reference's. A work–precision diagram (error and event ratio against CPU-seconds) is saved as a PNG.
+ratio to the reference's, and the error with the reference's own noise taken out (:func:`noise_corrected_error`).
+A work–precision diagram (error and event ratio against CPU-seconds) is saved as a PNG. ``--work DIR`` keeps the
+renders there and re-uses references found in it (the expensive part) with the CPU time they took.
 
 Run: ``nice -n 10 python benchmarks/bench_convergence.py --scenes office --resolution 48x36 --duration 0.01``.
 """
