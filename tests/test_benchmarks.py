@@ -72,7 +72,7 @@ def test_bench_convergence_measures_brute_force_and_the_cache_against_a_referenc
                          capture_output=True, text=True, timeout=600, env=child_env)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     (result,) = json.loads(table.read_text())
-    assert set(result["methods"]) == {"brute force 16 spp", "cache 4 spp, 16 q"}
+    assert set(result["methods"]) == {"brute force 16 spp", "cache 4 spp, 16 q, linear"}
     for row in result["methods"].values():
         assert row["cpu_s"] > 0 and 0 < row["median_error"] < 1 and len(row["event_ratio_100"]) == 2
     assert out.stat().st_size > 10_000

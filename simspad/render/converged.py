@@ -17,7 +17,8 @@ built once per sequence from probe views spread over the trajectory (:func:`buil
 those views find gets ``q_samples`` estimates of Q by next-event estimation plus a cosine-sampled path continued
 by Mitsuba's own path integrator (multiple importance sampling between the two), and each cell keeps their
 mean. A keyframe's lookup interpolates trilinearly between the cells around a point, at the finest of
-:data:`LEVELS` that has them; a vertex no cell covers gets its own Q estimate then (``fallback_samples``).
+:data:`LEVELS` that has them, else in the cells of the next-closest normal bins; a vertex no cell covers gets its
+own Q estimate then (``fallback_samples``).
 
 What stays is a per-surface bias (the cache's cell size smooths irradiance, e.g. contact shadows, over a few
 pixels) and the cache's own noise, which is fixed to the surfaces and moves with them like texture instead of
@@ -35,10 +36,17 @@ from pathlib import Path
 
 import numpy as np
 
+from simspad.render.flow import object_poses
 from simspad.render.mitsuba_scene import psf_blur
 
-#: Cell sizes tried by a lookup, in multiples of the finest cell, finest first.
-LEVELS = (1, 4, 16)
+#: Cell sizes tried by a lookup, in multiples of the finest cell, finest first. The coarsest (256 finest cells:
+#: a room at the probe views' depth) catches the few glossy-chain vertices no probe view saw, which would each
+#: cost an irradiance estimate of their own (a kernel launch per keyframe: more than the rest of a small one).
+LEVELS = (1, 4, 16, 64, 256)
+#: Normal bins: the dominant axis and its sign (6 bins).
+N_NORMAL_BINS = 6
+#: The normal of each bin (bin 2·axis + (1 if negative)).
+_BIN_NORMALS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
 #: Chain vertices followed per camera sample (the first hit plus glossy/specular bounces).
 CHAIN_VERTICES = 3
 #: Path length used where the scene's integrator has none (max_depth = -1: Russian roulette only).
@@ -126,15 +134,20 @@ class IrradianceCache:
             c = p[todo] / h - 0.5
             base = np.floor(c).astype(np.int64)
             frac = c - base
+            # The camera rays of a keyframe fall many to a cell: the 8 corner cells are searched once per distinct
+            # (base cell, normal bin, object), and each point gathers their values.
+            _, first, inv = np.unique(_hash(base, nb[todo], obj[todo], level), return_index=True,
+                                      return_inverse=True)
+            ubase, unb, uobj = base[first], nb[todo][first], obj[todo][first]
             acc = np.zeros((todo.size, 3))
             wsum = np.zeros(todo.size)
             for corner in range(8):
                 off = np.array([(corner >> k) & 1 for k in range(3)], dtype=np.int64)
-                key = _hash(base + off, nb[todo], obj[todo], level)
+                key = _hash(ubase + off, unb, uobj, level)
                 slot = np.clip(np.searchsorted(keys, key), 0, keys.size - 1)
                 hit = (keys[slot] == key) & (counts[slot] >= min_count)
-                w = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1) * hit
-                acc += w[:, None] * values[slot]
+                w = np.prod(np.where(off == 1, frac, 1.0 - frac), axis=1) * hit[inv]
+                acc += w[:, None] * values[slot[inv]]
                 wsum += w
             ok = wsum > 1e-6
             out[todo[ok]] = acc[ok] / wsum[ok, None]
@@ -330,15 +343,32 @@ class ConvergedRenderer:
         ray = self._camera_rays(pos)
         emitted, vertices = self.trace_chain(ray, seed)
         total = emitted
-        for k, v in enumerate(vertices):
+        qs, misses = [], []
+        for v in vertices:
             p_rest = self.rest_points(v, object_poses)
             n_rest = self.rest_normals(v, object_poses)
             q, found = (cache.lookup(p_rest, n_rest, v["obj"]) if cache is not None
                         else (np.zeros((v["idx"].size, 3)), np.zeros(v["idx"].size, dtype=bool)))
             miss = np.nonzero(~found)[0]
-            if miss.size:
-                q[miss] = self.estimate_q(v["ro"][miss], v["rd"][miss], self.fallback_samples,
-                                          _mix(seed, 1000 + k))
+            if miss.size and cache is not None:
+                # A vertex whose normal bin no probe saw near it (a blade's edge): the cells of the next-closest
+                # normal bins, before paying for an estimate of its own (a kernel launch per keyframe).
+                order = np.argsort(-(n_rest[miss] @ _BIN_NORMALS.T), axis=1)
+                for rank in range(1, N_NORMAL_BINS):
+                    q_alt, ok = cache.lookup(p_rest[miss], _BIN_NORMALS[order[:, rank]], v["obj"][miss])
+                    q[miss[ok]] = q_alt[ok]
+                    miss, order = miss[~ok], order[~ok]
+                    if not miss.size:
+                        break
+            qs.append(q)
+            misses.append(miss)
+        if any(m.size for m in misses):  # one estimate for the vertices of every depth that no cell covers
+            est = self.estimate_q(np.concatenate([v["ro"][m] for v, m in zip(vertices, misses)]),
+                                  np.concatenate([v["rd"][m] for v, m in zip(vertices, misses)]),
+                                  self.fallback_samples, _mix(seed, 1000))
+            for q, m in zip(qs, misses):
+                q[m], est = est[:m.size], est[m.size:]
+        for v, q in zip(vertices, qs):
             np.add.at(total, v["idx"], v["weight"] * q)
         h, w = self.ms.height, self.ms.width
         rgb = total.reshape(h, w, self.spp, 3).mean(axis=2).astype(np.float32)
@@ -467,3 +497,36 @@ def load_cache(path) -> IrradianceCache | None:
     except (OSError, KeyError, ValueError):
         return None
     return cache
+
+
+def layout_convergence(layout) -> dict | None:
+    """The ``renderer.convergence`` fields of a render layout's timeline (None: a path-traced render)."""
+    return layout.timeline.get("renderer", {}).get("convergence") or None
+
+
+def converged_renderer(layout, ms, ts, out_dir) -> tuple[ConvergedRenderer, IrradianceCache]:
+    """The :class:`ConvergedRenderer` of a converged render ``layout`` and its cache: read from the render directory
+    ``out_dir``, or built from the layout's probe keyframes (the same values in any process) and written there."""
+    fields = layout_convergence(layout)
+    cr = ConvergedRenderer(ms, layout.spp)
+    path = Path(out_dir) / fields["cache_file"]
+    cache = load_cache(path) if path.is_file() else None
+    if cache is None:
+        poses = [(np.asarray(layout.camera_to_world[i]),
+                  {k: np.asarray(m) for k, m in layout.objects_to_world[i].items()} if layout.objects_to_world
+                  else object_poses(ts, layout.times_s[i]))
+                 for i in probe_indices(layout.n_keyframes, fields["cache_probes"])]
+        cache = build_cache(cr, poses, layout.seed, fields["cache_samples"], fields["cache_cell_px"])
+        save_cache(cache, path)
+    return cr, cache
+
+
+def layout_radiance(layout, ms, ts, out_dir):
+    """The radiance pass of ``layout``'s keyframes, as ``radiance(seed, objects) -> [H, W, 3]`` at the scene's
+    current pose (``objects``: the animated objects' poses by name, as posed): None for a path-traced render (the
+    caller uses ``ms.render_radiance(seed)``); for a converged one its cache's render (:func:`converged_renderer`:
+    the cache is read or built now, before the caller poses the scene, since building it poses the probe views)."""
+    if layout_convergence(layout) is None:
+        return None
+    cr, cache = converged_renderer(layout, ms, ts, out_dir)
+    return lambda seed, objects: cr.render(cache, seed, objects)

@@ -47,11 +47,7 @@ from simspad.render.converged import (
     CACHE_FILE_PREFIX,
     CHAIN_VERTICES,
     LEVELS,
-    ConvergedRenderer,
-    build_cache,
-    load_cache,
-    probe_indices,
-    save_cache,
+    converged_renderer,
 )
 from simspad.render.flow import (
     camera_poses,
@@ -230,7 +226,8 @@ def layout_render(scene, trajectory, settings: RenderSettings, *, variant: str |
         schedule["shared_keyframes"] = {"n_keyframes": n_shared, "time_scale": float(prefix_time_scale)}
     if warp:
         schedule["warp"] = {"stride": int(settings.warp_stride), "threshold": float(settings.warp_threshold),
-                            "emission_layer": bool(settings.warp_emission and ms.splits_emission)}
+                            "emission_layer": bool(settings.warp_emission and ms.splits_emission
+                                                   and convergence is None)}
     timeline = dict(
         scene=info.name, scene_hash=base_key["scene"], trajectory=loaded.traj_source,
         trajectory_hash=loaded.traj_hash, start_s=t0, duration_s=float(duration_s),
@@ -348,7 +345,7 @@ def render_keyframes(scene, trajectory, layout: RenderLayout, indices, *, out_di
               for i in indices]
     converged = None
     if todo and layout.timeline.get("renderer", {}).get("convergence"):
-        converged = _converged_renderer(layout, loaded, out_dir)
+        converged = converged_renderer(layout, loaded.ms, loaded.ts, out_dir)
     done = _render_frames(loaded, frames, layout.seed, counter, progress, on_frame, converged)
     if geometry_todo:  # the geometry passes at the ground-truth instants these keyframes own
         render_geometry(loaded.ms, geometry, geometry_todo, out_dir)
@@ -391,23 +388,6 @@ def convergence_fields(settings: RenderSettings) -> dict | None:
 def cache_file_name(base_key: dict) -> str:
     """The irradiance cache's file name in the render directory, keyed like the keyframes."""
     return f"{CACHE_FILE_PREFIX}{frame_key(base_key, -1.0)}.npz"
-
-
-def _converged_renderer(layout: RenderLayout, loaded: LoadedScene, out_dir: Path):
-    """The :class:`ConvergedRenderer` of ``layout`` and its cache: read from the render directory, or built from
-    the layout's probe keyframes (the same values in any process) and written there."""
-    fields = layout.timeline["renderer"]["convergence"]
-    cr = ConvergedRenderer(loaded.ms, layout.spp)
-    path = out_dir / fields["cache_file"]
-    cache = load_cache(path) if path.is_file() else None
-    if cache is None:
-        poses = [(np.asarray(layout.camera_to_world[i]),
-                  {k: np.asarray(m) for k, m in layout.objects_to_world[i].items()} if layout.objects_to_world
-                  else object_poses(loaded.ts, layout.times_s[i]))
-                 for i in probe_indices(layout.n_keyframes, fields["cache_probes"])]
-        cache = build_cache(cr, poses, layout.seed, fields["cache_samples"], fields["cache_cell_px"])
-        save_cache(cache, path)
-    return cr, cache
 
 
 def finalize_render(layout: RenderLayout, out_dir) -> Path:

@@ -33,6 +33,7 @@ from simspad.io.exr import read_exr, write_exr
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.noise_budget import PROBE_SEED_OFFSET
+from simspad.render.converged import layout_radiance
 from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction, tiles_of_blocks
 from simspad.render.flow import object_poses
 from simspad.render.keyframe_files import frame_key, frame_names, write_frame
@@ -157,8 +158,10 @@ class MitsubaKeyframes:
     it rendered is counted for :class:`WarpedFrames`."""
 
     def __init__(self, ms: MitsubaScene, ts: TrajectorySet, layout: RenderLayout, out_dir: Path,
-                 counter: CompileCounter, bar):
+                 counter: CompileCounter, bar, radiance=None):
         self.ms, self.ts, self.out_dir, self.counter, self.bar = ms, ts, out_dir, counter, bar
+        #: A converged render's radiance (``radiance(seed, object_poses)`` from its cache); None: path tracing.
+        self.radiance = radiance
         self.times, self.cam_poses, self.seed = (np.asarray(layout.times_s), np.asarray(layout.camera_to_world),
                                                  layout.seed)
         self.with_emission = bool(layout.warp.get("emission_layer", False))
@@ -203,7 +206,8 @@ class MitsubaKeyframes:
                               self.source_emission(i))
         tic = time.perf_counter()
         ms.set_pose(*self.poses_at(i))
-        rgb = ms.render_radiance(self.seed)
+        rgb = (ms.render_radiance(self.seed) if self.radiance is None
+               else self.radiance(self.seed, self.poses_at(i)[1]))
         depth, object_id = ms.render_depth_ids(self.seed)
         write_frame(path, rgb, depth, object_id)
         self.frame_times.append(time.perf_counter() - tic)
@@ -248,7 +252,8 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, layout: RenderLayout,
     over workers. Anchors and the noise probe (:func:`render_noise_probe`) found in ``out_dir`` are re-used; the
     noise map is computed from keyframe 0's file and the probe's, so every chunk decides with the same numbers.
     """
-    keyframes = MitsubaKeyframes(ms, ts, layout, out_dir, counter, bar)
+    radiance = layout_radiance(layout, ms, ts, out_dir)  # a converged render's cache (None: path tracing)
+    keyframes = MitsubaKeyframes(ms, ts, layout, out_dir, counter, bar, radiance)
     stride, threshold = layout.warp["stride"], layout.warp["threshold"]
     camera = PinholeCamera.from_fov(ms.x_fov_deg, ms.width, ms.height)
     first = 0 if anchors is None else anchors[0]
@@ -262,7 +267,12 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, layout: RenderLayout,
         else:
             key0 = read_exr(out_dir / keyframes.render_names[0])["rgb"]
         render_noise_probe(ms, ts, layout, out_dir)
-        probe = read_exr(out_dir / noise_probe_name(layout))["rgb"]
+        if radiance is None:
+            probe = read_exr(out_dir / noise_probe_name(layout))["rgb"]
+        else:  # a converged render's warps are judged against its own noise: keyframe 0 from the same cache with
+            # the next seed (kept in memory, the same in every chunk; the probe file stays path-traced: the budget's)
+            ms.set_pose(*keyframes.poses_at(0))
+            probe = radiance(layout.seed + PROBE_SEED_OFFSET, keyframes.poses_at(0)[1])
         if keyframes.with_emission:
             ms.set_pose(*keyframes.poses_at(0))
             key0_emission = keyframes.ready[0].emission if first == 0 else keyframes.source_emission(0)
@@ -271,12 +281,15 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, layout: RenderLayout,
                 key0 = np.maximum(key0 - key0_emission, 0.0)
                 probe = np.maximum(probe - ms.render_emission(layout.seed + PROBE_SEED_OFFSET), 0.0)
         noise_y, noise = noise_map(key0, probe)
-    patcher = BlockPatcher(ms, keyframes.poses_at, layout.seed, keyframes.written)
+    # Blocks are path-traced: a converged render re-renders whole keyframes where the warps disagree.
+    patcher = (BlockPatcher(ms, keyframes.poses_at, layout.seed, keyframes.written) if radiance is None
+               else None)
     report = synthesize_keyframes(camera, keyframes.times, keyframes, stride=stride, threshold=threshold,
                                   noise_y=noise_y, patch=patcher, anchors=anchors)
     return WarpedFrames(keyframes.names, report, keyframes.frame_times, keyframes.compiled, keyframes.n_reused,
                         time.perf_counter() - tic, stride, threshold, noise, len(keyframes.geometry_times),
-                        float(sum(keyframes.geometry_times)), patcher.n_blocks, patcher.seconds,
+                        float(sum(keyframes.geometry_times)), patcher.n_blocks if patcher else 0,
+                        patcher.seconds if patcher else 0.0,
                         sorted(keyframes.emitting | report.emission_passes), probe_emission)
 
 
