@@ -104,6 +104,55 @@ def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, r
         open_recording(broken)
 
 
+TOY_SPEC = """
+name = "toy"
+seed = 1
+lux = [50]
+
+[[sequences]]
+name = "star"
+scene = "siemens-star"
+duration_s = {duration_s}
+resolution = [{w}, {h}]
+spp = 2
+
+[sensors.photodiode]
+rate_hz = {rate_hz}
+[sensors.frames]
+preset = "blackfly_s"
+frame_rate_hz = 1000.0
+
+[evaluation]
+rate_hz = 1000
+"""
+
+
+def _toy_spec(path, rate_hz=1500.0):
+    path.write_text(TOY_SPEC.format(duration_s=DURATION_S, w=W, h=H, rate_hz=rate_hz))
+    return path
+
+
+@pytest.mark.slow
+def test_the_estimate_costs_a_toy_sensor_from_its_row(photodiode, tmp_path):
+    """`generate --estimate`'s cost model comes from the table: the toy (no cost model of its own) is probed and
+    costed per megapixel-row of its size model, and its rate moves the estimate by exactly those rows."""
+    from simspad.cli.generate import _measured_estimate
+    from simspad.dataset.estimate import estimate_spec, format_estimate
+    from simspad.dataset.spec_validation import load_spec
+
+    spec = load_spec(_toy_spec(tmp_path / "toy.toml"))
+    est, costs = _measured_estimate(spec)
+    assert costs.sim_s_per["photodiode"] > 0 and costs.bytes_per["photodiode"] > 0
+    assert costs.sim_unit == {"frames": "MP·frame", "photodiode": "MP·row"}
+    assert re.search(r"photodiode \S+ s/MP·row", format_estimate(est, costs, workers=1))
+    # ten times the rate: ten times the rows, each at the probed cost (time and bytes)
+    faster = estimate_spec(load_spec(_toy_spec(tmp_path / "fast.toml", rate_hz=15000.0)), costs)
+    rows = DURATION_S * (15000.0 - 1500.0) * W * H / 1e6
+    assert faster.sim_cpu_s - est.sim_cpu_s == pytest.approx(costs.sim_s_per["photodiode"] * rows, rel=1e-9)
+    assert faster.recordings_bytes - est.recordings_bytes == pytest.approx(
+        costs.bytes_per["photodiode"] * rows, abs=1)
+
+
 def test_a_toy_recording_is_readable_where_the_toy_is_not_installed(photodiode, render_dir, tmp_path, child_env):
     out = simulate_recording(render_dir, tmp_path / "toy.h5", RecordingSettings(
         lux=LUX, sensors={"photodiode": toy_sensor.PhotodiodeParams()}))
@@ -159,3 +208,8 @@ def test_an_installed_plugin_sensor_runs_through_the_command_line(simspad_cli, r
     unknown = simspad_cli.run("simulate", render_dir, "--lux", LUX, "--sensors", "photodiode", "--out",
                               tmp_path / "no.h5")
     assert unknown.returncode == 2 and "unknown sensor 'photodiode'" in unknown.stderr
+    estimate = simspad_cli.run("generate", _toy_spec(tmp_path / "toy.toml"), "--estimate", "--out",
+                               tmp_path / "toy-dataset", env=env)
+    assert estimate.returncode == 0, estimate.stderr
+    assert re.search(r"photodiode \S+ s/MP·row", estimate.stdout), estimate.stdout
+    assert not (tmp_path / "toy-dataset").exists()
