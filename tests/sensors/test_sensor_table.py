@@ -153,9 +153,16 @@ def test_the_estimate_costs_a_toy_sensor_from_its_row(photodiode, tmp_path):
         costs.bytes_per["photodiode"] * rows, abs=1)
 
 
-def test_a_toy_recording_is_readable_where_the_toy_is_not_installed(photodiode, render_dir, tmp_path, child_env):
+def test_a_toy_recording_is_readable_where_the_toy_is_not_installed(photodiode, render_dir, tmp_path, child_env,
+                                                                     simspad_cli):
     out = simulate_recording(render_dir, tmp_path / "toy.h5", RecordingSettings(
         lux=LUX, sensors={"photodiode": toy_sensor.PhotodiodeParams()}))
+    # the preview has no panel for it: it draws the ground truth and says so in one line
+    png = tmp_path / "toy.png"
+    preview = simspad_cli.run("preview", out, "--kind", "png", "--out", png)
+    assert preview.returncode == 0, preview.stderr
+    assert "  no panel for photodiode: the preview draws the ground truth and spad, frames, events only" \
+        in preview.stdout and png.is_file()
     code = ("import sys; from simspad.io.recording import open_recording\n"
             "with open_recording(sys.argv[1]) as rec: print(rec.sensors, rec.attrs['sensors'], rec.gt.t.size)")
     run = subprocess.run([sys.executable, "-c", code, str(out)], capture_output=True, text=True, timeout=120,
