@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
+from simspad.cli.app import main
 from simspad.cli.describe import describe_recording
 from simspad.errors import InputError, SimSpadError
 from simspad.io.recording import SENSOR_KINDS, open_recording
@@ -59,7 +60,7 @@ def render_dir(tmp_path_factory):
     return out
 
 
-def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, render_dir, tmp_path):
+def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, render_dir, tmp_path, capsys):
     assert "photodiode" in SENSOR_KINDS  # the name every layer imported before is live
     params = sensor_params("photodiode", None, {"rate_hz": 1500.0})
     assert params == toy_sensor.PhotodiodeParams(rate_hz=1500.0)
@@ -83,6 +84,10 @@ def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, r
         assert (a["rate_hz"], a["n_samples"], a["lux"]) == (1500.0, n, LUX)  # the common attrs written by simulate
     text = describe_recording(out)
     assert f"    photodiode {n} samples, " in text and "rate_hz=1500" in text
+    assert main(["simulate", "--help"]) == 0  # the options' help is the table's, toy included
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "sensor kinds, of: spad, frames, events, photodiode. [default: spad,frames,events]" in help_text
+    assert "photodiode basic" in help_text
 
     # the size model: rows counted before simulating, a unit slip refused with the figure
     assert recording_samples({"photodiode": params}, 2.0, 1000.0) == {"gt": 2000.0, "photodiode": 3000.0}
