@@ -89,6 +89,8 @@ class Sensor:
         size model, else megapixel-seconds (:meth:`work_units`).
     sim_unit : str
         The name of that unit in the estimate's printout (``"Gbit"``); with ``sim_units``.
+    summarize : callable, optional
+        ``summarize(params) -> str``: its one-line parameter summary in ``simspad info SPEC``; None: the fields.
     """
 
     name: str
@@ -107,6 +109,7 @@ class Sensor:
     spec_problems: Callable[..., list[Problem]] | None = None
     sim_units: Callable[[object, int, int, float], float] | None = None
     sim_unit: str = ""
+    summarize: Callable[[object], str] | None = None
 
     def work_units(self, params, width_px: int, height_px: int, duration_s: float) -> float:
         """Work units of simulating ``duration_s`` of this sensor on ``width_px × height_px`` (:attr:`sim_units`,
@@ -171,7 +174,7 @@ SPAD = Sensor(
     rows=lambda params, duration_s: duration_s / params.bin_s, rate_field="bin_s",
     row_bytes=lambda width, height: height * -(-width // 8),
     spec_problems=_spad_spec_problems,
-    sim_units=_spad_gbit, sim_unit="Gbit",
+    sim_units=_spad_gbit, sim_unit="Gbit", summarize=spad_describe.summarize_spad,
 )
 FRAMES = Sensor(
     name="frames", params=FrameParams, presets=PRESETS["frames"],
@@ -182,7 +185,7 @@ FRAMES = Sensor(
     rows=lambda params, duration_s: duration_s * params.frame_rate_hz, rate_field="frame_rate_hz",
     row_bytes=lambda width, height: 2 * width * height,
     sim_units=lambda params, width, height, duration_s: int(duration_s * params.frame_rate_hz) * width * height / 1e6,
-    sim_unit="MP·frame",
+    sim_unit="MP·frame", summarize=frames_describe.summarize_frames,
 )
 EVENTS = Sensor(
     name="events", params=EventParams, presets=PRESETS["events"],
@@ -191,7 +194,7 @@ EVENTS = Sensor(
     simulate=_simulate_events,
     describe=events_describe.describe_events, describe_attrs=events_describe.DESCRIBE_ATTRS,
     precheck=events.check_noise_work,
-    spec_problems=_events_spec_problems,
+    spec_problems=_events_spec_problems, summarize=events_describe.summarize_events,
 )
 
 #: The built-in sensors, in the order their groups are written and listed.

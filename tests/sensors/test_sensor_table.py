@@ -141,11 +141,15 @@ def _toy_spec(path, rate_hz=1500.0):
 def test_the_estimate_costs_a_toy_sensor_from_its_row(photodiode, tmp_path):
     """`generate --estimate`'s cost model comes from the table: the toy (no cost model of its own) is probed and
     costed per megapixel-row of its size model, and its rate moves the estimate by exactly those rows."""
+    from simspad.cli.describe_spec import describe_spec
     from simspad.cli.generate import _measured_estimate
     from simspad.dataset.estimate import estimate_spec, format_estimate
     from simspad.dataset.spec_validation import load_spec
 
     spec = load_spec(_toy_spec(tmp_path / "toy.toml"))
+    summary = describe_spec(tmp_path / "toy.toml")  # `simspad info SPEC`: each row's line, the toy's fields
+    assert f"      {registry.FRAMES.summarize(spec.sensors['frames'].params)}\n" in summary
+    assert "    photodiode: preset basic (overrides: rate_hz=1500.0)\n      rate_hz 1500.0\n" in summary
     est, costs = _measured_estimate(spec)
     assert costs.sim_s_per["photodiode"] > 0 and costs.bytes_per["photodiode"] > 0
     assert costs.sim_unit == {"frames": "MP·frame", "photodiode": "MP·row"}
