@@ -17,7 +17,9 @@ video frame is one instant t of recording time, and shows, in panels of the reco
   speed up to the clip's 99th percentile of the image speed; pixels whose flow is not valid dimmed to half);
 - **instances**: the instance mask, one fixed colour per scene object (black: nothing hit).
 
-Absent sensors leave their panels out. Labels give the scene, speed, lux, the instant, and each panel's window.
+Absent sensors leave their panels out. The panels are drawings of the three built-in sensors' data
+(:data:`PANEL_SENSORS`); another sensor of the recording (one added through the sensor table) gets no panel, and
+:attr:`PreviewResult.no_panel` names it. Labels give the scene, speed, lux, the instant, and each panel's window.
 Memory is one video frame and one window of sensor data, whatever the recording's length: the ground truth,
 frames and SPAD bits are read per instant, the events per window.
 """
@@ -112,6 +114,18 @@ class PreviewResult:
     height_px: int
     times_s: np.ndarray
     panels: dict
+    no_panel: tuple[str, ...] = ()  # the recording's sensors this preview has no panel for (not drawn)
+
+
+#: The sensors with panels: each panel draws that sensor's own data (binary frames, DN frames, event polarity).
+PANEL_SENSORS = ("spad", "frames", "events")
+
+
+def sensors_without_panel(rec) -> tuple[str, ...]:
+    """The sensors written into open recording ``rec`` (its ``sensors`` attribute, which also names groups this
+    process has no table row for) that have no panel here."""
+    written = [k for k in str(rec.attrs.get("sensors", "")).split(",") if k]
+    return tuple(k for k in written if k not in PANEL_SENSORS)
 
 
 def preview_times(t0: float, t1: float, settings: PreviewSettings, kind: str) -> np.ndarray:
@@ -402,6 +416,7 @@ def write_preview(recording, out, settings: PreviewSettings = PreviewSettings(),
     check_output_file(out)
     with open_recording(recording) as rec:
         boxes: dict = {}
+        no_panel = sensors_without_panel(rec)
         n_expected = None if kind == ".png" else int(preview_times(*_span(rec, settings), settings, kind).size)
         frames = iter_preview_frames(rec, settings, kind, boxes)
         shown, size = [], (0, 0)
@@ -431,7 +446,8 @@ def write_preview(recording, out, settings: PreviewSettings = PreviewSettings(),
                     os.replace(named, tmp)
                 finally:
                     named.unlink(missing_ok=True)
-    return PreviewResult(out, len(shown) if kind != ".png" else 1, size[0], size[1], np.asarray(shown), boxes)
+    return PreviewResult(out, len(shown) if kind != ".png" else 1, size[0], size[1], np.asarray(shown), boxes,
+                         no_panel)
 
 
 #: A leaderboard strip's preview: the first few milliseconds, slowed so that a GIF of a dozen frames shows them.

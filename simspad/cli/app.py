@@ -28,6 +28,34 @@ _DEBUG = False
 METHOD_NAMES_HELP = "nedi_akf, adaptive_nedi_akf, akf_fe, cf, edi, ni, nedi, qbp"
 
 
+class _TableHelpOption(click.Option):
+    """An option whose help text is written when help is shown, by ``table_help()`` from the sensor table:
+    importing the table (simulators, plugins) at start-up would cost every command, ``simspad --help`` too, 0.3 s."""
+
+    def __init__(self, *args, table_help, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._table_help = table_help
+
+    def get_help_record(self, ctx):
+        self.help = self._table_help()
+        return super().get_help_record(ctx)
+
+
+def _sensors_help() -> str:
+    from simspad.sensors.registry import BUILTIN_SENSORS, SENSORS  # deferred: see _TableHelpOption
+
+    return (f"Comma-separated sensor kinds, of: {', '.join(SENSORS)}.  "
+            f"[default: {','.join(row.name for row in BUILTIN_SENSORS)}]")
+
+
+def _set_help() -> str:
+    from simspad.sensors.registry import SENSORS  # deferred: see _TableHelpOption
+
+    presets = "; ".join(f"{kind} {', '.join(row.presets)}" for kind, row in SENSORS.items())
+    return ("Override a preset field, e.g. --set spad.gate_s=1e-6 (repeatable; presets: " + presets
+            + " — `simspad info` on a recording lists every field).")
+
+
 def _parse_resolution(ctx, param, value):
     """``WxH`` text to two integers; their values are checked by :class:`~simspad.render.settings.RenderSettings`."""
     if value is None:
@@ -105,14 +133,12 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
 @cli.command()
 @click.argument("render_dir", type=click.Path(path_type=Path))
 @click.option("--lux", type=float, required=True, help="Scene illuminance in lux (> 0).")
-@click.option("--sensors", default="spad,frames,events", show_default=True,
-              help="Comma-separated sensor kinds (spad, frames, events).")
+@click.option("--sensors", default=None, cls=_TableHelpOption, table_help=_sensors_help)
 @click.option("--start", "start_s", type=float, default=None, help="Start time (s); default: first keyframe.")
 @click.option("--duration", "duration_s", type=float, default=None, help="Duration (s); default: to the last keyframe.")
 @click.option("--seed", type=int, default=defaults.SEED, show_default=True)
-@click.option("--set", "overrides", multiple=True, metavar="SENSOR.FIELD=VALUE",
-              help="Override a preset field, e.g. --set spad.gate_s=1e-6 (repeatable; presets: swissspad2, "
-                   "blackfly_s, prophesee_gen4 — `simspad info` on a recording lists every field).")
+@click.option("--set", "overrides", multiple=True, metavar="SENSOR.FIELD=VALUE", cls=_TableHelpOption,
+              table_help=_set_help)
 @click.option("--gt-rate", "gt_rate_hz", type=float, default=None,
               help="Ground-truth rate (Hz); default: the render's geometry-pass rate (its masks and motion field are "
                    "recorded at those instants), else 1000.")

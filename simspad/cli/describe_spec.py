@@ -6,10 +6,10 @@ import dataclasses
 from pathlib import Path
 
 from simspad.bundled import bundled_relative
-from simspad.cli.text import format_duration_s
 from simspad.dataset.spec_hashing import spec_hash
 from simspad.dataset.spec_validation import load_spec
 from simspad.scenes.library import resolve_scene
+from simspad.sensors.registry import SENSORS
 
 
 def describe_spec(path) -> str:
@@ -55,17 +55,8 @@ def _overrides_text(overrides: dict) -> str:
 
 
 def _key_params(p) -> str:
-    kind = getattr(p, "kind", "")
-    if not all(hasattr(p, k) for k in ("pixel_pitch_m", "fill_factor", "qe")):  # a sensor without pixels
-        return ", ".join(f"{f.name} {getattr(p, f.name)!r}" for f in dataclasses.fields(p))
-    pitch = f"pitch {p.pixel_pitch_m * 1e6:.4g} µm, fill {p.fill_factor:.3g}, QE {p.qe:.3g}"
-    if kind == "spad":
-        return (f"{pitch}, bin {format_duration_s(p.bin_s)} ({1 / p.bin_s / 1e3:.4g} kHz), gate {format_duration_s(p.gate_s)}, "
-                f"DCR median {p.dcr_median_cps:g} cps, dead time {format_duration_s(p.dead_time_s)}")
-    if kind == "frames":
-        return (f"{pitch}, {p.frame_rate_hz:g} fps, exposure {format_duration_s(p.exposure_s)}, K {p.gain_dn_per_e:g} DN/e⁻, "
-                f"read noise {p.read_noise_e:g} e⁻, full well {p.full_well_e:g} e⁻, {p.bit_depth} bit")
-    if kind == "events":
-        return (f"{pitch}, thresholds +{p.threshold_on:g}/−{p.threshold_off:g} (σ {p.threshold_sigma:g}), "
-                f"refractory {format_duration_s(p.refractory_s)}, latency {format_duration_s(p.latency_s)}")
-    return pitch
+    """The sensor's parameter line: its table row's ``summarize``, else every field."""
+    row = SENSORS.get(getattr(p, "kind", ""))
+    if row is not None and row.summarize is not None:
+        return row.summarize(p)
+    return ", ".join(f"{f.name} {getattr(p, f.name)!r}" for f in dataclasses.fields(p))

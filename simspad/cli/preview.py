@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from simspad.analysis.preview import PreviewSettings, write_preview
+from simspad.analysis.preview import PANEL_SENSORS, PreviewSettings, write_preview
 from simspad.errors import SimSpadError
 from simspad.evaluate.recordings import list_recordings
 from simspad.io.atomic import check_output_path
@@ -38,5 +38,8 @@ def preview_from_cli(target, out_path, *, kind: str = "mp4", **settings) -> list
         res = write_preview(rec_path, out, settings, progress=True)
         click.echo(f"wrote {res.path}: {res.n_frames} frame(s) of {res.width_px}×{res.height_px} px, "
                    f"t = {res.times_s[0] * 1e3:.3f}–{res.times_s[-1] * 1e3:.3f} ms")
+        if res.no_panel:
+            click.echo(f"  no panel for {', '.join(res.no_panel)}: the preview draws the ground truth and "
+                       f"{', '.join(PANEL_SENSORS)} only")
         written.append(res.path)
     return written

@@ -19,6 +19,7 @@ from simspad.io.recording.layout import FORMAT as RECORDING_FORMAT
 from simspad.io.render_dir import TIMELINE_FILE
 from simspad.sensors.presets import SENSOR_KINDS, sensor_params
 from simspad.sensors.recording_settings import lux_problem
+from simspad.sensors.registry import BUILTIN_SENSORS
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
 
 
@@ -87,13 +88,14 @@ def _is_recording(path: Path) -> bool:
     return (fmt.decode(errors="replace") if isinstance(fmt, bytes) else fmt) == RECORDING_FORMAT
 
 
-def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | None, duration_s: float | None,
+def simulate_from_cli(render_dir, *, lux: float, sensors: str | None, start_s: float | None, duration_s: float | None,
                       seed: int, overrides, out_path, gt_rate_hz: float | None = None) -> Path:
-    """The ``simspad simulate`` command: parse ``--sensors`` and ``--set``, then :func:`simulate_recording`
-    (ground truth at ``gt_rate_hz``; None: the render's geometry-pass rate, else the default)."""
+    """The ``simspad simulate`` command: parse ``--sensors`` (None: the built-in sensors) and ``--set``, then
+    :func:`simulate_recording` (ground truth at ``gt_rate_hz``; None: the render's geometry-pass rate, else the
+    default)."""
     if problem := lux_problem(lux):  # the recording settings' rule, reported under the option's name
         raise SimSpadError(problem, field="--lux")
-    kinds = parse_sensor_list(sensors)
+    kinds = parse_sensor_list(sensors) if sensors is not None else [row.name for row in BUILTIN_SENSORS]
     per_kind = parse_overrides(overrides, kinds)
     params = {}
     for kind in kinds:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Callable
 
+from simspad.sensors.text import format_duration_s  # noqa: F401  (the cli summaries format durations so)
+
 
 def format_bytes(n) -> str:
     """``n`` bytes in binary units (``"512 B"``, ``"1.5 MiB"``); ``"-"`` for None."""
@@ -15,17 +17,6 @@ def format_bytes(n) -> str:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024
     return f"{n:.1f} TiB"
-
-
-def format_duration_s(x) -> str:
-    """A duration in seconds with the unit that reads best (``"10 ms"``, ``"1.5 µs"``); text (``"auto"``) as is."""
-    if isinstance(x, str):
-        return x
-    x = float(x)
-    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("ns", 1e-9)):
-        if abs(x) >= scale:
-            return f"{x / scale:.4g} {unit}"
-    return f"{x:g} s"
 
 
 def recording_table(recordings: list[dict], last_column: str, last_value: Callable[[dict], str]) -> list[str]:

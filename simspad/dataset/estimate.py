@@ -8,11 +8,12 @@ spec's sizes.
 - **Render time** per keyframe: a calibration render of a few keyframes of each scene along its own trajectory,
   on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
   traversal, depth pass, EXR write; variable part: path tracing).
-- **Simulation time**: one throughput probe of the spec's sensors on a small render (ground truth, SPAD, frames,
-  events), measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by
-  Gbit of SPAD data, megapixel-frames and megapixel-seconds; plus a per-recording fixed part (the all-sensor
-  probe minus its units at the marginal costs). The probe's pixels are repeated up to 4 × 4 towards the spec's
-  width (:data:`PROBE_MAX_UPSAMPLE`): costs per row, per kernel call and per keyframe then weigh per pixel as
+- **Simulation time**: one throughput probe of the ground truth and of each of the spec's sensors on a small
+  render, measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by each
+  sensor's work units from its sensor-table row (:meth:`~simspad.sensors.registry.Sensor.work_units`: Gbit of
+  SPAD data, megapixel-frames, megapixel-seconds of events; megapixel-rows or -seconds for a row without a cost
+  model of its own); plus a per-recording fixed part (the all-sensor probe minus its units at the marginal
+  costs). The probe's pixels are repeated up to 4 × 4 towards the spec's width (:data:`PROBE_MAX_UPSAMPLE`): costs per row, per kernel call and per keyframe then weigh per pixel as
   they do at full size (64 × 48 px put them at 3–6× the cost per pixel of 256² and 512² recordings).
 - **Disk**: the probe files' bytes per unit (the same marginal fit, so compression counts) and per recording;
   renders from the calibration EXRs' bytes per pixel.
@@ -48,7 +49,6 @@ from simspad.dataset.executors import (
 from simspad.dataset.plan import make_plan
 from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write_exr
 from simspad.io.geometry import GEOMETRY_BYTES_PER_PX
-from simspad.io.recording import open_recording
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
 from simspad.render.mitsuba_env import CUDA_VARIANT, cuda_device_name, select_variant
@@ -62,8 +62,8 @@ from simspad.render.renderer import (
 from simspad.render.settings import RenderSettings
 from simspad.scenes.library import resolve_scene
 from simspad.sensors.recording_size import recording_bytes, recording_samples
+from simspad.sensors.registry import ordered
 from simspad.sensors.simulate import RecordingSettings, simulate_recording
-from simspad.sensors.spad import n_bins
 
 #: Calibration render: width (px), keyframes timed per sample count (after one untimed keyframe that compiles
 #: the kernels), the two sample counts whose difference separates the per-sample cost from the fixed one, and the
@@ -148,10 +148,11 @@ class UnitCosts:
 
     render: dict = field(default_factory=dict)  # scene name -> SceneRenderCost
     gt_s_per_mp_frame: float = 0.0
-    #: seconds and bytes per unit of each sensor: spad per Gbit, frames per MP·frame, events per MP·s
+    #: seconds and bytes per work unit of each sensor (its table row's ``work_units``: spad per Gbit, frames per
+    #: MP·frame, events per MP·s, a row without a cost model per MP·row or MP·s)
     sim_s_per: dict = field(default_factory=dict)
     bytes_per: dict = field(default_factory=dict)  # also "gt": bytes per MP·frame
-    events_per_mp_s: float = 0.0
+    sim_unit: dict = field(default_factory=dict)  # kind -> the name of its work unit
     recording_fixed_s: float = 0.0  # per recording, beyond the per-unit costs
     recording_fixed_bytes: float = 0.0
     sim_rss_bytes_per_mp: float | None = None  # peak-RSS growth of a simulation with its pixel count
@@ -255,33 +256,23 @@ def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
     # 32 frames' bytes), which would inflate a full-size recording's ground truth by up to half
     stored = [_gt_stored_frames(p) for _, p in gt]
     costs.bytes_per["gt"] = max(gt_bytes, 0) / (mp * max(stored[1] - stored[0], 1))
-    for kind in params:
+    for row, kind_params in ordered(params):
+        kind = row.name
         (t1, p1), (t2, p2) = run([kind], half), run([kind], full)
         dt = max(t2 - t1 - gt_marginal, 1e-9)
         db = max(p2.stat().st_size - p1.stat().st_size - gt_bytes, 0)
-        with open_recording(p1) as r1, open_recording(p2) as r2:
-            if kind == "spad":
-                units = (r2.spad.n_bins - r1.spad.n_bins) * w * h / 1e9  # Gbit
-            elif kind == "frames":
-                units = (r2.frames.n_frames - r1.frames.n_frames) * mp  # MP·frame
-                if units <= 0:  # no frame boundary between the two durations: the whole run's average instead
-                    units, dt, db = r2.frames.n_frames * mp, max(t2 - gt[1][0], 1e-9), max(
-                        p2.stat().st_size - gt[1][1].stat().st_size, 0)
-            elif kind == "events":
-                units = mp * (full - half)  # MP·s
-                costs.events_per_mp_s = r2.events.n_events / (mp * full)
-            else:
-                continue
+        units = row.work_units(kind_params, w, h, full) - row.work_units(kind_params, w, h, half)
+        if units <= 0:  # no unit between the two durations (no frame boundary): the whole run's average instead
+            units, dt, db = row.work_units(kind_params, w, h, full), max(t2 - gt[1][0], 1e-9), max(
+                p2.stat().st_size - gt[1][1].stat().st_size, 0)
         if units <= 0:  # nothing of this sensor in the probe (e.g. no frame in its span): no figure to scale
             continue
         costs.sim_s_per[kind] = dt / units
         costs.bytes_per[kind] = db / units
+        costs.sim_unit[kind] = row.work_unit
     # What a recording costs beyond its per-unit parts (file creation, attributes, poses, reading the render):
     # the all-sensor probe minus its units at the marginal costs.
-    with open_recording(p_all) as r:
-        units_full = {"spad": r.spad.n_bins * w * h / 1e9 if "spad" in params else 0.0,
-                      "frames": r.frames.n_frames * mp if "frames" in params else 0.0,
-                      "events": mp * full if "events" in params else 0.0}
+    units_full = {row.name: row.work_units(kind_params, w, h, full) for row, kind_params in ordered(params)}
     gt_full = mp * _gt_stored_frames(p_all)
     costs.recording_fixed_s = max(t_all - costs.gt_s_per_mp_frame * gt_full - sum(
         costs.sim_s_per.get(k, 0.0) * u for k, u in units_full.items()), 0.0)
@@ -424,7 +415,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
                              cost.process_rss_bytes + cost.rss_bytes_per_mp_spp * w * h / 1e6 * seq.spp)
         size_of[r.rel_dir] = (w, h)
     plan_s = time.perf_counter() - t0
-    spad, frames = spec.sensors.get("spad"), spec.sensors.get("frames")
+    sensors = ordered({kind: sensor.params for kind, sensor in spec.sensors.items()})
     sim_cpu, longest, rec_bytes, sim_rss = 0.0, 0.0, 0.0, None
     for rec in plan.recordings:
         w, h = size_of[rec.render_rel_dir]
@@ -433,17 +424,10 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         gt_units = mp * duration_s * rec.settings.gt_rate_hz
         t = costs.recording_fixed_s + costs.gt_s_per_mp_frame * gt_units
         b = costs.recording_fixed_bytes + costs.bytes_per.get("gt", 0.0) * gt_units
-        units = {}
-        if spad is not None:
-            gate = spad.params.gate_s if spad.params.gate_s != "auto" else spad.params.bin_s
-            units["spad"] = n_bins(duration_s, spad.params.bin_s, gate) * w * h / 1e9
-        if frames is not None:
-            units["frames"] = int(duration_s * frames.params.frame_rate_hz) * mp
-        if "events" in spec.sensors:
-            units["events"] = mp * duration_s
-        for kind, u in units.items():
-            t += costs.sim_s_per.get(kind, 0.0) * u
-            b += costs.bytes_per.get(kind, 0.0) * u
+        for row, params in sensors:
+            u = row.work_units(params, w, h, duration_s)
+            t += costs.sim_s_per.get(row.name, 0.0) * u
+            b += costs.bytes_per.get(row.name, 0.0) * u
         sim_cpu += t
         longest = max(longest, t)
         rec_bytes += b
@@ -522,8 +506,7 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
     lines.append(f"  unit costs   render s/keyframe ({'the GPU' if est.render_gpu else 'one core'}): " + ", ".join(
         f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp (scene load {c.load_s:.1f} s per chunk)"
         for name, c in costs.render.items()))
-    sim = [f"{k} {v:.3g} s/" + {"spad": "Gbit", "frames": "MP·frame", "events": "MP·s"}[k]
-           for k, v in costs.sim_s_per.items()]
+    sim = [f"{k} {v:.3g} s/{costs.sim_unit.get(k, 'unit')}" for k, v in costs.sim_s_per.items()]
     probed = f" (probed at {costs.sim_probe_px[0]}×{costs.sim_probe_px[1]} px)" if costs.sim_probe_px else ""
     lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]) + probed)
     return "\n".join(lines)

@@ -72,7 +72,6 @@ class Trajectory:
             self._rotation_spline = RotationSpline(times_s, rotations)
         else:
             self._position_spline = self._velocity_spline = self._rotation_spline = None
-        self._rotations = rotations
 
     # -- construction helpers ----------------------------------------------------------------------------------
     @classmethod

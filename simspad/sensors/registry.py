@@ -82,6 +82,15 @@ class Sensor:
         ``spec_problems(params, where, width_px, height_px, duration_s, lux_levels) -> [(field, message)]``: bounds
         of a dataset spec's sequence ``where`` beyond the model checks (the SPAD's shortest bin, the event
         camera's noise work at each lux level).
+    sim_units : callable, optional
+        Cost model of ``simspad generate --estimate``: ``sim_units(params, width_px, height_px, duration_s) ->
+        float``, the work units a recording's simulation time and bytes scale with (the estimate measures seconds
+        and bytes per unit on a probe and multiplies). None: megapixel-rows (``rows × width·height / 1e6``) with a
+        size model, else megapixel-seconds (:meth:`work_units`).
+    sim_unit : str
+        The name of that unit in the estimate's printout (``"Gbit"``); with ``sim_units``.
+    summarize : callable, optional
+        ``summarize(params) -> str``: its one-line parameter summary in ``simspad info SPEC``; None: the fields.
     """
 
     name: str
@@ -98,6 +107,26 @@ class Sensor:
     row_bytes: Callable[[int, int], int] | None = None
     precheck: Callable[..., None] | None = None
     spec_problems: Callable[..., list[Problem]] | None = None
+    sim_units: Callable[[object, int, int, float], float] | None = None
+    sim_unit: str = ""
+    summarize: Callable[[object], str] | None = None
+
+    def work_units(self, params, width_px: int, height_px: int, duration_s: float) -> float:
+        """Work units of simulating ``duration_s`` of this sensor on ``width_px × height_px`` (:attr:`sim_units`,
+        or the generic model: megapixel-rows with a size model, megapixel-seconds without)."""
+        if self.sim_units is not None:
+            return float(self.sim_units(params, width_px, height_px, duration_s))
+        mp = width_px * height_px / 1e6
+        if self.rows is not None:
+            return self.rows(params, duration_s) * mp
+        return mp * duration_s
+
+    @property
+    def work_unit(self) -> str:
+        """The name of :meth:`work_units`' unit (``"Gbit"``, ``"MP·row"``, ``"MP·s"``)."""
+        if self.sim_units is not None:
+            return self.sim_unit
+        return "MP·row" if self.rows is not None else "MP·s"
 
 
 # -- the built-in rows --------------------------------------------------------------------------------------------
@@ -130,6 +159,12 @@ def _events_spec_problems(params, where, width, height, duration_s, lux_levels) 
     return out
 
 
+def _spad_gbit(params, width, height, duration_s) -> float:
+    """Gbit of binary frames over ``duration_s``: whole gates inside it × pixels (the gate resolved as simulated)."""
+    gate_s = params.bin_s if params.gate_s == "auto" else params.gate_s
+    return spad.n_bins(duration_s, params.bin_s, gate_s) * width * height / 1e9
+
+
 SPAD = Sensor(
     name="spad", params=SpadParams, presets=PRESETS["spad"],
     default_preset=DEFAULT_PRESET["spad"], layout=SPAD_LAYOUT,
@@ -139,6 +174,7 @@ SPAD = Sensor(
     rows=lambda params, duration_s: duration_s / params.bin_s, rate_field="bin_s",
     row_bytes=lambda width, height: height * -(-width // 8),
     spec_problems=_spad_spec_problems,
+    sim_units=_spad_gbit, sim_unit="Gbit", summarize=spad_describe.summarize_spad,
 )
 FRAMES = Sensor(
     name="frames", params=FrameParams, presets=PRESETS["frames"],
@@ -148,6 +184,8 @@ FRAMES = Sensor(
     describe=frames_describe.describe_frames, describe_attrs=frames_describe.DESCRIBE_ATTRS,
     rows=lambda params, duration_s: duration_s * params.frame_rate_hz, rate_field="frame_rate_hz",
     row_bytes=lambda width, height: 2 * width * height,
+    sim_units=lambda params, width, height, duration_s: int(duration_s * params.frame_rate_hz) * width * height / 1e6,
+    sim_unit="MP·frame", summarize=frames_describe.summarize_frames,
 )
 EVENTS = Sensor(
     name="events", params=EventParams, presets=PRESETS["events"],
@@ -156,7 +194,7 @@ EVENTS = Sensor(
     simulate=_simulate_events,
     describe=events_describe.describe_events, describe_attrs=events_describe.DESCRIBE_ATTRS,
     precheck=events.check_noise_work,
-    spec_problems=_events_spec_problems,
+    spec_problems=_events_spec_problems, summarize=events_describe.summarize_events,
 )
 
 #: The built-in sensors, in the order their groups are written and listed.
@@ -195,6 +233,8 @@ def register(sensor: Sensor) -> None:
         raise ValueError(f"sensor {name!r}: every preset must be a {sensor.params.__name__}")
     if (sensor.rows is None) != (sensor.row_bytes is None):
         raise ValueError(f"sensor {name!r}: rows and row_bytes go together (the size model)")
+    if (sensor.sim_units is None) != (not sensor.sim_unit):
+        raise ValueError(f"sensor {name!r}: sim_units and sim_unit go together (the estimate's cost model)")
     if SENSOR_LAYOUTS.get(name) is not sensor.layout:
         register_layout(sensor.layout)
     register_presets(name, sensor.presets, sensor.default_preset)

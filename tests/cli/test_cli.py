@@ -72,6 +72,7 @@ def test_help_names_the_real_choices_and_output_defaults(capsys):
     assert all(name in render for name in builtin_scene_names())
     simulate = help_of("simulate")
     assert all(preset in simulate for presets in PRESETS.values() for preset in presets)
+    assert f"sensor kinds, of: {', '.join(PRESETS)}." in simulate  # the sensor table's kinds
     assert "output/snr.png" in help_of("snr")
 
 

@@ -368,7 +368,7 @@ def test_estimate_matches_the_generated_dataset(tiny, monkeypatch, capsys):
     root, spec_path, out, _ = tiny
     spec = load_spec(spec_path)
     costs = measure_unit_costs(spec)
-    assert costs.render["siemens-star"].b_s > 0 and costs.sim_s_per["spad"] > 0 and costs.events_per_mp_s > 0
+    assert costs.render["siemens-star"].b_s > 0 and costs.sim_s_per["spad"] > 0 and costs.sim_s_per["events"] > 0
     assert costs.sim_probe_px == (64, 48)  # the spec is no wider than the probe render: no upsampling
     est = estimate_spec(spec, costs)
     m = read_manifest(out)

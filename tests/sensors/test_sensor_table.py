@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
+from simspad.cli.app import main
 from simspad.cli.describe import describe_recording
 from simspad.errors import InputError, SimSpadError
 from simspad.io.recording import SENSOR_KINDS, open_recording
@@ -59,7 +60,7 @@ def render_dir(tmp_path_factory):
     return out
 
 
-def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, render_dir, tmp_path):
+def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, render_dir, tmp_path, capsys):
     assert "photodiode" in SENSOR_KINDS  # the name every layer imported before is live
     params = sensor_params("photodiode", None, {"rate_hz": 1500.0})
     assert params == toy_sensor.PhotodiodeParams(rate_hz=1500.0)
@@ -83,6 +84,10 @@ def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, r
         assert (a["rate_hz"], a["n_samples"], a["lux"]) == (1500.0, n, LUX)  # the common attrs written by simulate
     text = describe_recording(out)
     assert f"    photodiode {n} samples, " in text and "rate_hz=1500" in text
+    assert main(["simulate", "--help"]) == 0  # the options' help is the table's, toy included
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "sensor kinds, of: spad, frames, events, photodiode. [default: spad,frames,events]" in help_text
+    assert "photodiode basic" in help_text
 
     # the size model: rows counted before simulating, a unit slip refused with the figure
     assert recording_samples({"photodiode": params}, 2.0, 1000.0) == {"gt": 2000.0, "photodiode": 3000.0}
@@ -104,9 +109,69 @@ def test_a_toy_sensor_registered_through_the_table_runs_end_to_end(photodiode, r
         open_recording(broken)
 
 
-def test_a_toy_recording_is_readable_where_the_toy_is_not_installed(photodiode, render_dir, tmp_path, child_env):
+TOY_SPEC = """
+name = "toy"
+seed = 1
+lux = [50]
+
+[[sequences]]
+name = "star"
+scene = "siemens-star"
+duration_s = {duration_s}
+resolution = [{w}, {h}]
+spp = 2
+
+[sensors.photodiode]
+rate_hz = {rate_hz}
+[sensors.frames]
+preset = "blackfly_s"
+frame_rate_hz = 1000.0
+
+[evaluation]
+rate_hz = 1000
+"""
+
+
+def _toy_spec(path, rate_hz=1500.0):
+    path.write_text(TOY_SPEC.format(duration_s=DURATION_S, w=W, h=H, rate_hz=rate_hz))
+    return path
+
+
+@pytest.mark.slow
+def test_the_estimate_costs_a_toy_sensor_from_its_row(photodiode, tmp_path):
+    """`generate --estimate`'s cost model comes from the table: the toy (no cost model of its own) is probed and
+    costed per megapixel-row of its size model, and its rate moves the estimate by exactly those rows."""
+    from simspad.cli.describe_spec import describe_spec
+    from simspad.cli.generate import _measured_estimate
+    from simspad.dataset.estimate import estimate_spec, format_estimate
+    from simspad.dataset.spec_validation import load_spec
+
+    spec = load_spec(_toy_spec(tmp_path / "toy.toml"))
+    summary = describe_spec(tmp_path / "toy.toml")  # `simspad info SPEC`: each row's line, the toy's fields
+    assert f"      {registry.FRAMES.summarize(spec.sensors['frames'].params)}\n" in summary
+    assert "    photodiode: preset basic (overrides: rate_hz=1500.0)\n      rate_hz 1500.0\n" in summary
+    est, costs = _measured_estimate(spec)
+    assert costs.sim_s_per["photodiode"] > 0 and costs.bytes_per["photodiode"] > 0
+    assert costs.sim_unit == {"frames": "MP·frame", "photodiode": "MP·row"}
+    assert re.search(r"photodiode \S+ s/MP·row", format_estimate(est, costs, workers=1))
+    # ten times the rate: ten times the rows, each at the probed cost (time and bytes)
+    faster = estimate_spec(load_spec(_toy_spec(tmp_path / "fast.toml", rate_hz=15000.0)), costs)
+    rows = DURATION_S * (15000.0 - 1500.0) * W * H / 1e6
+    assert faster.sim_cpu_s - est.sim_cpu_s == pytest.approx(costs.sim_s_per["photodiode"] * rows, rel=1e-9)
+    assert faster.recordings_bytes - est.recordings_bytes == pytest.approx(
+        costs.bytes_per["photodiode"] * rows, abs=1)
+
+
+def test_a_toy_recording_is_readable_where_the_toy_is_not_installed(photodiode, render_dir, tmp_path, child_env,
+                                                                     simspad_cli):
     out = simulate_recording(render_dir, tmp_path / "toy.h5", RecordingSettings(
         lux=LUX, sensors={"photodiode": toy_sensor.PhotodiodeParams()}))
+    # the preview has no panel for it: it draws the ground truth and says so in one line
+    png = tmp_path / "toy.png"
+    preview = simspad_cli.run("preview", out, "--kind", "png", "--out", png)
+    assert preview.returncode == 0, preview.stderr
+    assert "  no panel for photodiode: the preview draws the ground truth and spad, frames, events only" \
+        in preview.stdout and png.is_file()
     code = ("import sys; from simspad.io.recording import open_recording\n"
             "with open_recording(sys.argv[1]) as rec: print(rec.sensors, rec.attrs['sensors'], rec.gt.t.size)")
     run = subprocess.run([sys.executable, "-c", code, str(out)], capture_output=True, text=True, timeout=120,
@@ -159,3 +224,8 @@ def test_an_installed_plugin_sensor_runs_through_the_command_line(simspad_cli, r
     unknown = simspad_cli.run("simulate", render_dir, "--lux", LUX, "--sensors", "photodiode", "--out",
                               tmp_path / "no.h5")
     assert unknown.returncode == 2 and "unknown sensor 'photodiode'" in unknown.stderr
+    estimate = simspad_cli.run("generate", _toy_spec(tmp_path / "toy.toml"), "--estimate", "--out",
+                               tmp_path / "toy-dataset", env=env)
+    assert estimate.returncode == 0, estimate.stderr
+    assert re.search(r"photodiode \S+ s/MP·row", estimate.stdout), estimate.stdout
+    assert not (tmp_path / "toy-dataset").exists()

@@ -180,14 +180,5 @@ REQUIRED_DATASETS = {
     "gt": ("gt/t", "gt/flux"),
     **{k: tuple(f"{k}/{d}" for d in row.required) for k, row in SENSOR_LAYOUTS.items()},
 }
-#: Datasets a recording may hold besides the required ones (the geometry of a render with geometry passes:
-#: docs/format.md, section 3), by group; when one of a group's geometry datasets is there, all but
-#: ``gt/object_to_world`` (written only when objects move) are.
-OPTIONAL_DATASETS = {
-    "gt": ("gt/depth", "gt/instance", "gt/flow", "gt/flow_valid", "gt/velocity", "gt/camera_to_world",
-           "gt/object_to_world"),
-    "camera": ("camera/K",),
-    "poses": ("poses/t", "poses/camera_to_world"),
-}
 #: Attributes a sensor group must carry when the group is present (the built-in groups).
 REQUIRED_GROUP_ATTRS = {k: row.required_attrs for k, row in SENSOR_LAYOUTS.items()}

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from simspad.sensors.text import format_duration_s, pixel_text
+
 #: Attributes shown on the group's parameter line.
 DESCRIBE_ATTRS = ("preset", "threshold_on", "threshold_off", "threshold_sigma", "refractory_s", "pixel_pitch_m")
 
@@ -30,3 +32,9 @@ def describe_events(rec) -> tuple[str, list[str]]:
     return (f"{n} events ({n / dur if dur > 0 else float('nan'):.4g} ev/s, {rate_px:.4g} ev/pixel/s{on})",
             [*([f"labels: {labels}"] if labels else []),
              f"bandwidth {rate_px / 1e3:.4g} kHz/pixel = {rate_px * 32:.4g} bit/pixel/s (32 bit/event)"])
+
+
+def summarize_events(p) -> str:
+    """The event camera's parameter line of ``simspad info SPEC``: pixel, thresholds, refractory, latency."""
+    return (f"{pixel_text(p)}, thresholds +{p.threshold_on:g}/−{p.threshold_off:g} (σ {p.threshold_sigma:g}), "
+            f"refractory {format_duration_s(p.refractory_s)}, latency {format_duration_s(p.latency_s)}")

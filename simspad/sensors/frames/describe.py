@@ -3,6 +3,8 @@ row)."""
 
 from __future__ import annotations
 
+from simspad.sensors.text import format_duration_s, pixel_text
+
 #: Attributes shown on the group's parameter line.
 DESCRIBE_ATTRS = ("preset", "exposure_s", "gain_dn_per_e", "read_noise_e", "full_well_e", "bit_depth", "qe",
                   "pixel_pitch_m")
@@ -20,3 +22,10 @@ def describe_frames(rec) -> tuple[str, list[str]]:
     return (f"{k} frames at {rate:.4g} fps",
             [f"first frame mean {mean_dn:.1f} DN",
              f"bandwidth {rate / 1e3:.4g} kHz/pixel = {rate * bits:.4g} bit/pixel/s"])
+
+
+def summarize_frames(p) -> str:
+    """The frame camera's parameter line of ``simspad info SPEC``: pixel, rate, exposure, gain, noise, range."""
+    return (f"{pixel_text(p)}, {p.frame_rate_hz:g} fps, exposure {format_duration_s(p.exposure_s)}, K "
+            f"{p.gain_dn_per_e:g} DN/e⁻, read noise {p.read_noise_e:g} e⁻, full well {p.full_well_e:g} e⁻, "
+            f"{p.bit_depth} bit")

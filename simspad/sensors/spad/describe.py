@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from simspad.sensors.text import format_duration_s, pixel_text
+
 #: Binary frames read to estimate the mean detection probability (cheap: the file is not read whole).
 SAMPLE_BINS = 1024
 #: Attributes shown on the group's parameter line.
@@ -24,3 +26,10 @@ def describe_spad(rec) -> tuple[str, list[str]]:
             [f"mean P(1) {p1:.4f} (first {sample} frames), DCR median {np.median(dcr):.3g} cps",
              f"bandwidth {1 / bin_s / 1e3:.4g} kHz/pixel = {1 / bin_s:.4g} bit/pixel/s "
              f"({n_px / bin_s / 8 / 2**20:.4g} MiB/s for the grid)"])
+
+
+def summarize_spad(p) -> str:
+    """The SPAD's parameter line of ``simspad info SPEC``: pixel, bin (and rate), gate, dark counts, dead time."""
+    return (f"{pixel_text(p)}, bin {format_duration_s(p.bin_s)} ({1 / p.bin_s / 1e3:.4g} kHz), gate "
+            f"{format_duration_s(p.gate_s)}, DCR median {p.dcr_median_cps:g} cps, dead time "
+            f"{format_duration_s(p.dead_time_s)}")
