@@ -8,7 +8,6 @@ The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); th
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -101,13 +100,14 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
             params[kind] = sensor_params(kind, None, per_kind[kind])
         except ValueError as exc:
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
-    if seed is None or seed < 0 or seed >= 2**64:
-        raise SimSpadError(f"must be an integer in [0, 2**64), got {seed!r}", field="--seed")
+    # the recording settings' rules, reported under the options' names before the output is touched
+    if problem := defaults.seed_problem(seed):
+        raise SimSpadError(problem, field="--seed")
+    if gt_rate_hz is not None and (problem := defaults.gt_rate_problem(gt_rate_hz)):
+        raise SimSpadError(problem, field="--gt-rate")
     check_output_file(out_path, recognise=_is_recording, what="a SimSPAD recording")
     if gt_rate_hz is None:
         gt_rate_hz = _render_gt_rate(render_dir)
-    elif not (math.isfinite(gt_rate_hz) and gt_rate_hz > 0):
-        raise SimSpadError(f"must be a finite number of Hz > 0, got {gt_rate_hz!r}", field="--gt-rate")
     settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed,
                                  gt_rate_hz=gt_rate_hz)
     return simulate_recording(render_dir, out_path, settings, progress=sys.stderr.isatty())

@@ -134,10 +134,10 @@ def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> Dat
     if not isinstance(description, str):
         err.add("description", f"got {_type_name(description)} (expected a string)")
 
-    seed = raw.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        err.add("seed", f"got {_type_name(seed)} {seed!r} (expected an integer ≥ 0)")
-        seed = 0
+    seed = raw.get("seed", defaults.SEED)
+    if problem := defaults.seed_problem(seed):  # the render and recording settings' rule
+        err.add("seed", problem)
+        seed = defaults.SEED
 
     output = raw.get("output", f"output/{name}")
     if not isinstance(output, str) or not output.strip():
@@ -412,7 +412,10 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
     for key in value:
         if key not in _EVAL_KEYS:
             err.add(f"evaluation.{key}", f"unknown key (expected one of {', '.join(_EVAL_KEYS)})")
-    rate = _number(err, "evaluation.rate_hz", value.get("rate_hz", defaults.GT_RATE_HZ), positive=True, what="a rate in Hz > 0")
+    rate = value.get("rate_hz", defaults.GT_RATE_HZ)
+    if problem := defaults.gt_rate_problem(rate):  # the render and recording settings' rule
+        err.add("evaluation.rate_hz", problem)
+        rate = None
     methods = value.get("methods", [])
     if isinstance(methods, str):
         methods = [methods]
@@ -439,5 +442,5 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
             continue
         if checked:
             params[m] = checked
-    return EvaluationSpec(rate_hz=rate if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods),
+    return EvaluationSpec(rate_hz=float(rate) if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods),
                           params=params)

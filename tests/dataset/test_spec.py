@@ -155,7 +155,7 @@ def test_default_spec_is_valid():
 # Each bad case: (spec text replacing part of GOOD, expected field paths, a fragment of the message).
 BAD = {
     "toml_syntax": (GOOD.replace("spp = 4\n", "spp = 4\nbroken = = 2\n"), ["line 13"], "TOML syntax error"),
-    "wrong_type": (GOOD.replace("seed = 7", 'seed = "seven"'), ["seed"], "expected an integer"),
+    "wrong_type": (GOOD.replace("seed = 7", 'seed = "seven"'), ["seed"], "must be an integer in [0, 2**64)"),
     "lux_not_positive": (GOOD.replace("lux = [1, 10.5, 1e4]", "lux = [1, 0, -5]"), ["lux[1]", "lux[2]"], "> 0"),
     "lux_wrong_type": (GOOD.replace("lux = [1, 10.5, 1e4]", 'lux = ["bright"]'), ["lux[0]"], "expected"),
     "unknown_sensor_kind": (GOOD.replace("[sensors.frames]", "[sensors.lidar]"), ["sensors.lidar"],
