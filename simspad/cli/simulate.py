@@ -1,7 +1,9 @@
 """``simspad simulate``: parse ``--sensors`` and ``--set`` overrides, then simulate one recording.
 
-The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); the preset dataclasses of
-:mod:`simspad.sensors.presets` check them. The simulation itself is
+The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); the parameter records of
+:mod:`simspad.sensors.presets` check them (the same rule and message as a dataset spec's ``[sensors.*]``), and
+the options ``--lux``, ``--seed`` and ``--gt-rate`` meet the recording settings' rules, all before anything is
+written. The simulation itself is
 :func:`simspad.sensors.simulate.simulate_recording`.
 """
 
@@ -100,6 +102,8 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
             params[kind] = sensor_params(kind, None, per_kind[kind])
         except ValueError as exc:
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
+        except SimSpadError as exc:  # the parameter record's rule, under the option's name (--set spad.qe)
+            raise SimSpadError(exc.message, field=f"--set {exc.field.removeprefix('sensors.')}") from None
     # the recording settings' rules, reported under the options' names before the output is touched
     if problem := defaults.seed_problem(seed):
         raise SimSpadError(problem, field="--seed")

@@ -26,7 +26,7 @@ from simspad.render.settings import DEFAULT_INTERPOLATION, RenderSettings
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
-from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
+from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, override_problem, sensor_params
 from simspad.sensors.recording_settings import lux_problem
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
@@ -387,18 +387,16 @@ def _validate_sensors(raw: dict, err: _Errors) -> dict[str, SensorSpec]:
             continue
         overrides = {k: v for k, v in table.items() if k != "preset"}
         ok = True
-        for field_name, v in overrides.items():
-            try:
-                sensor_params(kind, preset, {field_name: v})
-            except ValueError as exc:
-                err.add(f"{where}.{field_name}", str(exc))
+        for field_name, v in overrides.items():  # each field by the parameter record's own rule
+            if problem := override_problem(kind, field_name, v):
+                err.add(f"{where}.{field_name}", problem)
                 ok = False
         if not ok:
             continue
-        try:
+        try:  # then the rules between fields (a gate within [min_gate_s, bin_s], …)
             params = sensor_params(kind, preset, overrides)
-        except ValueError as exc:
-            err.add(where, str(exc))
+        except SimSpadError as exc:
+            err.add(exc.field, exc.message)
             continue
         out[kind] = SensorSpec(kind, preset, params, overrides)
     return out
