@@ -1,9 +1,10 @@
 """Defaults shared by the CLI, the dataset spec and the library functions: each value is named once here.
 
 Units are in the names. Sensor defaults are the presets in :mod:`simspad.sensors.presets`; method defaults
-live with each method. The rules of the two values that records of different layers carry (the seed, checked by
-:func:`seed_problem`, and the ground-truth rate, by :func:`gt_rate_problem`) are here too, beside their defaults,
-so that the renderer's and the sensors' records, the dataset spec and the CLI give one message for each.
+live with each method. The rules of the values that records of different layers carry (the seed, checked by
+:func:`seed_problem`, a duration, by :func:`duration_problem`, and the ground-truth rate, by
+:func:`gt_rate_problem`) are here too, beside their defaults, so that the renderer's and the sensors' records,
+the dataset spec and the CLI give one message for each.
 """
 
 import math
@@ -34,6 +35,17 @@ def seed_problem(seed) -> str | None:
     if isinstance(seed, numbers.Integral) and not isinstance(seed, bool) and 0 <= seed < SEED_LIMIT:
         return None
     return f"must be an integer in [0, 2**64), got {seed!r}"
+
+
+def duration_problem(duration_s) -> str | None:
+    """What is wrong with a duration in seconds, or None: the one rule for a sequence's ``duration_s``,
+    ``--duration``, :class:`~simspad.render.settings.RenderSettings` and
+    :class:`~simspad.sensors.recording_settings.RecordingSettings` (a finite number > 0; the bound
+    :data:`MAX_DURATION_S` is a render's limit)."""
+    if isinstance(duration_s, numbers.Real) and not isinstance(duration_s, bool) and math.isfinite(duration_s) \
+            and duration_s > 0:
+        return None
+    return f"must be a number of seconds > 0, got {duration_s!r}"
 
 
 def gt_rate_problem(rate_hz) -> str | None:

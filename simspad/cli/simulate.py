@@ -102,13 +102,14 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str, start_s: float | 
             params[kind] = sensor_params(kind, None, per_kind[kind])
         except ValueError as exc:
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
-        except SimSpadError as exc:  # the parameter record's rule, under the option's name (--set spad.qe)
-            raise SimSpadError(exc.message, field=f"--set {exc.field.removeprefix('sensors.')}") from None
+        # a value the parameter record refuses raises its own error, naming sensors.<kind>.<field>
     # the recording settings' rules, reported under the options' names before the output is touched
     if problem := defaults.seed_problem(seed):
         raise SimSpadError(problem, field="--seed")
     if gt_rate_hz is not None and (problem := defaults.gt_rate_problem(gt_rate_hz)):
         raise SimSpadError(problem, field="--gt-rate")
+    if duration_s is not None and (problem := defaults.duration_problem(duration_s)):
+        raise SimSpadError(problem, field="--duration")
     check_output_file(out_path, recognise=_is_recording, what="a SimSPAD recording")
     if gt_rate_hz is None:
         gt_rate_hz = _render_gt_rate(render_dir)

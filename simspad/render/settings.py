@@ -136,8 +136,8 @@ class RenderSettings:
         def bad(field_name, message):
             out.append((field_name, message))
 
-        if not (_is_real(duration_s) and math.isfinite(duration_s) and duration_s > 0):
-            bad("duration", f"must be a number of seconds > 0, got {duration_s!r}")
+        if problem := defaults.duration_problem(duration_s):
+            bad("duration", problem)
         if not (_is_real(start_s) and math.isfinite(start_s)):
             bad("start", f"must be a finite number of seconds, got {start_s!r}")
         problem = resolution_problem(resolution)
