@@ -1,8 +1,14 @@
 """Defaults shared by the CLI, the dataset spec and the library functions: each value is named once here.
 
 Units are in the names. Sensor defaults are the presets in :mod:`simspad.sensors.presets`; method defaults
-live with each method.
+live with each method. The rules of the values that records of different layers carry (the seed, checked by
+:func:`seed_problem`, a duration, by :func:`duration_problem`, and the ground-truth rate, by
+:func:`gt_rate_problem`) are here too, beside their defaults, so that the renderer's and the sensors' records,
+the dataset spec and the CLI give one message for each.
 """
+
+import math
+import numbers
 
 #: Render resolution (width, height) in pixels.
 RESOLUTION_PX = (128, 96)
@@ -18,6 +24,39 @@ GT_RATE_HZ = 1000.0
 FRAME_BLUR_EXPOSURE_S = 10e-3
 #: Seed of renders and sensor streams when none is given.
 SEED = 0
+#: Seeds are integers in [0, SEED_LIMIT): a render seed is a uint64 (Mitsuba's sampler).
+SEED_LIMIT = 2**64
+
+
+def seed_problem(seed) -> str | None:
+    """What is wrong with a seed, or None: the one rule for a dataset spec's ``seed``, ``--seed``,
+    :class:`~simspad.render.settings.RenderSettings` and
+    :class:`~simspad.sensors.recording_settings.RecordingSettings` (an integer in [0, 2**64))."""
+    if isinstance(seed, numbers.Integral) and not isinstance(seed, bool) and 0 <= seed < SEED_LIMIT:
+        return None
+    return f"must be an integer in [0, 2**64), got {seed!r}"
+
+
+def duration_problem(duration_s) -> str | None:
+    """What is wrong with a duration in seconds, or None: the one rule for a sequence's ``duration_s``,
+    ``--duration``, :class:`~simspad.render.settings.RenderSettings` and
+    :class:`~simspad.sensors.recording_settings.RecordingSettings` (a finite number > 0; the bound
+    :data:`MAX_DURATION_S` is a render's limit)."""
+    if isinstance(duration_s, numbers.Real) and not isinstance(duration_s, bool) and math.isfinite(duration_s) \
+            and duration_s > 0:
+        return None
+    return f"must be a number of seconds > 0, got {duration_s!r}"
+
+
+def gt_rate_problem(rate_hz) -> str | None:
+    """What is wrong with a ground-truth (evaluation) rate in Hz, or None: the one rule for a dataset spec's
+    ``evaluation.rate_hz``, ``--gt-rate``, :class:`~simspad.render.settings.RenderSettings` and
+    :class:`~simspad.sensors.recording_settings.RecordingSettings` (a finite number > 0; the bound
+    :data:`MAX_RATE_HZ` and the samples per recording are the spec's limits, with the duration)."""
+    if isinstance(rate_hz, numbers.Real) and not isinstance(rate_hz, bool) and math.isfinite(rate_hz) \
+            and rate_hz > 0:
+        return None
+    return f"must be a finite number of Hz > 0, got {rate_hz!r}"
 
 # Resource bounds: values past these are typos or unit slips (µs written as s), refused before any work with the
 # figure; SIMSPAD_IGNORE_LIMITS=1 lifts the size bounds for a machine that can take them.

@@ -1,14 +1,15 @@
 """``simspad simulate``: parse ``--sensors`` and ``--set`` overrides, then simulate one recording.
 
-The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); the preset dataclasses of
-:mod:`simspad.sensors.presets` check them. The simulation itself is
+The ``--set SENSOR.FIELD=VALUE`` values are typed here (:func:`parse_value`); the parameter records of
+:mod:`simspad.sensors.presets` check them (the same rule and message as a dataset spec's ``[sensors.*]``), and
+the options ``--lux``, ``--seed`` and ``--gt-rate`` meet the recording settings' rules, all before anything is
+written. The simulation itself is
 :func:`simspad.sensors.simulate.simulate_recording`.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -103,13 +104,17 @@ def simulate_from_cli(render_dir, *, lux: float, sensors: str | None, start_s: f
             params[kind] = sensor_params(kind, None, per_kind[kind])
         except ValueError as exc:
             raise SimSpadError(str(exc), field=f"--set {kind}") from None
-    if seed is None or seed < 0 or seed >= 2**64:
-        raise SimSpadError(f"must be an integer in [0, 2**64), got {seed!r}", field="--seed")
+        # a value the parameter record refuses raises its own error, naming sensors.<kind>.<field>
+    # the recording settings' rules, reported under the options' names before the output is touched
+    if problem := defaults.seed_problem(seed):
+        raise SimSpadError(problem, field="--seed")
+    if gt_rate_hz is not None and (problem := defaults.gt_rate_problem(gt_rate_hz)):
+        raise SimSpadError(problem, field="--gt-rate")
+    if duration_s is not None and (problem := defaults.duration_problem(duration_s)):
+        raise SimSpadError(problem, field="--duration")
     check_output_file(out_path, recognise=_is_recording, what="a SimSPAD recording")
     if gt_rate_hz is None:
         gt_rate_hz = _render_gt_rate(render_dir)
-    elif not (math.isfinite(gt_rate_hz) and gt_rate_hz > 0):
-        raise SimSpadError(f"must be a finite number of Hz > 0, got {gt_rate_hz!r}", field="--gt-rate")
     settings = RecordingSettings(lux=lux, sensors=params, start_s=start_s, duration_s=duration_s, seed=seed,
                                  gt_rate_hz=gt_rate_hz)
     return simulate_recording(render_dir, out_path, settings, progress=sys.stderr.isatty())

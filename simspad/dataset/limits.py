@@ -3,8 +3,9 @@
 Per-field checks live with the records (:mod:`simspad.dataset.spec_validation` runs them; a sequence's render
 fields and their bounds are :meth:`simspad.render.settings.RenderSettings.problems`, a lux level
 :func:`simspad.sensors.recording_settings.lux_problem`); this module adds what needs several fields or a bound
-with a figure: every sensor's model checks at the sequence's size (the same ones the simulators run, so nothing
-fails after rendering) and its own bounds (its sensor-table row's ``spec_problems``: the SPAD's shortest bin, the
+with a figure: every sensor's rule at the sequence's size (its table row's ``validate(params, height)``, the
+one :func:`~simspad.sensors.simulate.simulate_recording` runs, so nothing fails after rendering; each parameter's
+own rule is its record's, checked when the spec built it) and its own bounds (its sensor-table row's ``spec_problems``: the SPAD's shortest bin, the
 event camera's noise work, a lower bound whatever the scene), and the number of rows of every sensor stream with a
 size model (frames, SPAD bins) and of ground-truth instants of each recording (at least one, at most
 :data:`~simspad.defaults.MAX_SAMPLES_PER_RECORDING`).

@@ -26,7 +26,7 @@ from simspad.render.settings import DEFAULT_INTERPOLATION, RenderSettings
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
-from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, sensor_params
+from simspad.sensors.presets import DEFAULT_PRESET, PRESETS, SENSOR_KINDS, override_problem, sensor_params
 from simspad.sensors.recording_settings import lux_problem
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
@@ -134,10 +134,10 @@ def _validate(raw: dict, path: Path, err: _Errors, has_file: bool = True) -> Dat
     if not isinstance(description, str):
         err.add("description", f"got {_type_name(description)} (expected a string)")
 
-    seed = raw.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        err.add("seed", f"got {_type_name(seed)} {seed!r} (expected an integer ≥ 0)")
-        seed = 0
+    seed = raw.get("seed", defaults.SEED)
+    if problem := defaults.seed_problem(seed):  # the render and recording settings' rule
+        err.add("seed", problem)
+        seed = defaults.SEED
 
     output = raw.get("output", f"output/{name}")
     if not isinstance(output, str) or not output.strip():
@@ -387,18 +387,16 @@ def _validate_sensors(raw: dict, err: _Errors) -> dict[str, SensorSpec]:
             continue
         overrides = {k: v for k, v in table.items() if k != "preset"}
         ok = True
-        for field_name, v in overrides.items():
-            try:
-                sensor_params(kind, preset, {field_name: v})
-            except ValueError as exc:
-                err.add(f"{where}.{field_name}", str(exc))
+        for field_name, v in overrides.items():  # each field by the parameter record's own rule
+            if problem := override_problem(kind, field_name, v):
+                err.add(f"{where}.{field_name}", problem)
                 ok = False
         if not ok:
             continue
-        try:
+        try:  # then the rules between fields (a gate within [min_gate_s, bin_s], …)
             params = sensor_params(kind, preset, overrides)
-        except ValueError as exc:
-            err.add(where, str(exc))
+        except SimSpadError as exc:
+            err.add(exc.field, exc.message)
             continue
         out[kind] = SensorSpec(kind, preset, params, overrides)
     return out
@@ -412,7 +410,10 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
     for key in value:
         if key not in _EVAL_KEYS:
             err.add(f"evaluation.{key}", f"unknown key (expected one of {', '.join(_EVAL_KEYS)})")
-    rate = _number(err, "evaluation.rate_hz", value.get("rate_hz", defaults.GT_RATE_HZ), positive=True, what="a rate in Hz > 0")
+    rate = value.get("rate_hz", defaults.GT_RATE_HZ)
+    if problem := defaults.gt_rate_problem(rate):  # the render and recording settings' rule
+        err.add("evaluation.rate_hz", problem)
+        rate = None
     methods = value.get("methods", [])
     if isinstance(methods, str):
         methods = [methods]
@@ -439,5 +440,5 @@ def _validate_evaluation(raw: dict, err: _Errors) -> EvaluationSpec:
             continue
         if checked:
             params[m] = checked
-    return EvaluationSpec(rate_hz=rate if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods),
+    return EvaluationSpec(rate_hz=float(rate) if rate is not None else defaults.GT_RATE_HZ, methods=tuple(methods),
                           params=params)

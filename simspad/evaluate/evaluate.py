@@ -428,12 +428,9 @@ def evaluate(target, methods=None, out_dir=None, rate_hz=None, *, workers=None,
                 preview(e.path, tmp / "previews" / f"{slug(e.key)}.png")
         meta = {"target": str(target), "rate_hz": rate_hz,
                 "methods": sorted({t.method for t in tasks}),
-                "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
-                                "lux": e.lux, "speed_factor": e.speed_factor,
-                                "image_speed_px_s": e.image_speed_px_s, **e.about,
-                                "ground_truth": whites[e.rel] is not None,
-                                **({"preview": f"previews/{slug(e.key)}.png"}
-                                   if whites[e.rel] is None and preview is not None else {})}
+                "recordings": [e.summary(ground_truth=whites[e.rel] is not None,
+                                         **({"preview": f"previews/{slug(e.key)}.png"}
+                                            if whites[e.rel] is None and preview is not None else {}))
                                for e in entries],
                 **({"notes": [NO_GT_NOTE]} if any(w is None for w in whites.values()) else {}),
                 "protocol": protocol_metadata(), "timings": timing,

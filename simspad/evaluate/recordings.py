@@ -50,6 +50,14 @@ class RecordingEntry:
     about: dict = field(default_factory=dict)
     """What the recording is, for the leaderboard's description of itself (:func:`recording_about`)."""
 
+    def summary(self, **extra) -> dict:
+        """The recording's entry in ``results.json``'s ``recordings`` list (``simspad evaluate`` and ``simspad
+        score`` alike): key, sequence, scene, lux, speed, what it is (:attr:`about`), then ``extra`` (evaluate's
+        ``ground_truth`` and ``preview``)."""
+        return {"recording": self.rel, "key": self.key, "sequence": self.sequence, "scene": self.scene,
+                "lux": self.lux, "speed_factor": self.speed_factor, "image_speed_px_s": self.image_speed_px_s,
+                **self.about, **extra}
+
 
 def read_manifest(dataset_dir: Path) -> dict | None:
     """The dataset's ``manifest.json`` checked by the one manifest reader (:func:`simspad.io.manifest.read_manifest`:

@@ -127,9 +127,7 @@ def score(submission, dataset_dir, out_dir=None, rate_hz=None) -> tuple[Path, li
             missing = [e.rel for e in entries if e.rel not in {p[1].rel for p in parts}]
             meta = {"submission": str(submission), "target": str(dataset_dir),
                     "rate_hz": rate_hz, "methods": [attrs["method"]], "submission_attrs": attrs,
-                    "recordings": [{"recording": e.rel, "key": e.key, "sequence": e.sequence, "scene": e.scene,
-                                    "lux": e.lux, "speed_factor": e.speed_factor,
-                                    "image_speed_px_s": e.image_speed_px_s, **e.about} for _, e, _ in parts],
+                    "recordings": [e.summary() for _, e, _ in parts],
                     "missing_recordings": missing, "protocol": protocol_metadata(),
                     "dataset": {k: (manifest or {}).get(k) for k in ("name", "spec_hash", "seed")}}
             write_results_dir(tmp, "score", rows, frame_rows, mtf_rows, meta)

@@ -32,16 +32,26 @@ def source_date_epoch() -> str | None:
     SimSpadError
         When it is set but not an integer Unix time.
     """
+    when = _source_date_epoch_datetime()
+    return None if when is None else format_utc(when)
+
+
+def _source_date_epoch_datetime() -> _dt.datetime | None:
     epoch = os.environ.get(SOURCE_DATE_EPOCH, "").strip()
     if not epoch:
         return None
     try:
-        seconds = int(epoch)
-        return format_utc(_dt.datetime.fromtimestamp(seconds, _dt.timezone.utc))
+        return _dt.datetime.fromtimestamp(int(epoch), _dt.timezone.utc)
     except (ValueError, OverflowError, OSError):
         raise SimSpadError(f"expected an integer Unix time, got {epoch!r}", field=SOURCE_DATE_EPOCH) from None
 
 
+def created_datetime() -> _dt.datetime:
+    """The creation time of an output, timezone-aware UTC to the second: ``$SOURCE_DATE_EPOCH`` when set, else
+    now (``results.json`` writes it in ISO 8601 with ``+00:00``)."""
+    return _source_date_epoch_datetime() or _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0)
+
+
 def created_utc() -> str:
-    """``$SOURCE_DATE_EPOCH`` when set, else now."""
-    return source_date_epoch() or utc_now()
+    """``$SOURCE_DATE_EPOCH`` when set, else now (:func:`format_utc`)."""
+    return format_utc(created_datetime())

@@ -26,7 +26,6 @@ import math
 import os
 import re
 from dataclasses import dataclass, fields
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +35,7 @@ from simspad import __version__, defaults
 from simspad.errors import InputError
 from simspad.io.csv_cells import csv_safe, csv_unescape
 from simspad.io.output_dirs import claim_output_dir
+from simspad.io.provenance import created_datetime
 from simspad.io.safe_paths import confined_path
 
 _NAN = float("nan")
@@ -231,7 +231,7 @@ def write_results_dir(tmp: Path, kind: str, rows: list[ResultRow], frame_rows: l
     """Write the tables and ``results.json`` of a results directory into ``tmp`` (images are written by callers).
 
     ``results.json`` is built here alone: the header every results folder shares (``format``, ``format_version``,
-    ``simspad_version``, ``created_utc`` taken once, here, and ``kind``: ``"evaluate"`` or ``"score"``), then the
+    ``simspad_version``, ``created_utc`` taken once, here (``$SOURCE_DATE_EPOCH`` when set, as for recordings), and ``kind``: ``"evaluate"`` or ``"score"``), then the
     command's own ``meta``, then ``results``, the rows (NaN as null).
     """
     tmp.mkdir(parents=True, exist_ok=True)
@@ -241,7 +241,7 @@ def write_results_dir(tmp: Path, kind: str, rows: list[ResultRow], frame_rows: l
     if mtf_rows:
         write_csv(tmp / "mtf.csv", MTF_COLUMNS, mtf_rows)
     doc = {"format": "simspad-results", "format_version": 1, "simspad_version": __version__,
-           "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "kind": kind, **meta}
+           "created_utc": created_datetime().isoformat(timespec="seconds"), "kind": kind, **meta}
     doc["results"] = [{c: (None if isinstance(v, float) and math.isnan(v) else v) for c, v in r.items()}
                       for r in dicts]
     (tmp / "results.json").write_text(json.dumps(doc, indent=2, sort_keys=True, default=str) + "\n",

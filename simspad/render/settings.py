@@ -139,8 +139,8 @@ class RenderSettings:
         def bad(field_name, message):
             out.append((field_name, message))
 
-        if not (_is_real(duration_s) and math.isfinite(duration_s) and duration_s > 0):
-            bad("duration", f"must be a number of seconds > 0, got {duration_s!r}")
+        if problem := defaults.duration_problem(duration_s):
+            bad("duration", problem)
         if not (_is_real(start_s) and math.isfinite(start_s)):
             bad("start", f"must be a finite number of seconds, got {start_s!r}")
         problem = resolution_problem(resolution)
@@ -152,8 +152,8 @@ class RenderSettings:
             bad("max_flow_px", f"must be a number of pixels > 0, got {max_flow_px!r}")
         if not (_is_real(min_rate_hz) and min_rate_hz > 0 and math.isfinite(min_rate_hz)):
             bad("min_rate_hz", f"must be a finite number of Hz > 0, got {min_rate_hz!r}")
-        if not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**64:
-            bad("seed", f"must be an integer in [0, 2**64), got {seed!r}")
+        if problem := defaults.seed_problem(seed):
+            bad("seed", problem)
         if not out:
             width, height = (int(v) for v in resolution)
             out += render_limit_problems(width, height, spp, max_flow_px, min_rate_hz, duration_s)
@@ -165,9 +165,8 @@ class RenderSettings:
             bad("warp_threshold", f"must be a number >= 0, got {self.warp_threshold!r}")
         if not isinstance(self.warp_emission, bool):
             bad("warp_emission", f"must be true or false, got {self.warp_emission!r}")
-        rate = self.gt_rate_hz
-        if rate is not None and not (_is_real(rate) and math.isfinite(rate) and rate > 0):
-            bad("gt_rate_hz", f"must be a finite number of Hz > 0, got {rate!r}")
+        if self.gt_rate_hz is not None and (problem := defaults.gt_rate_problem(self.gt_rate_hz)):
+            bad("gt_rate_hz", problem)
         if self.convergence not in CONVERGENCE_MODES:
             bad("convergence", f"must be one of {', '.join(CONVERGENCE_MODES)}, got {self.convergence!r}")
         if not (isinstance(self.cache_samples, numbers.Integral) and 1 <= self.cache_samples <= 65536):

@@ -1,6 +1,6 @@
 """What one recording simulates (:class:`RecordingSettings`), and the one check of a light level (:func:`lux_problem`).
 
-The record checks its light level when it is built, so :func:`simspad.sensors.simulate.simulate_recording` and
+The record checks its light level, seed, duration and ground-truth rate when it is built, so :func:`simspad.sensors.simulate.simulate_recording` and
 the dataset pipeline that builds one per recording (:mod:`simspad.dataset.plan`) trust it; a dataset spec's
 ``lux`` and ``simspad simulate --lux`` are checked by :func:`lux_problem` too, so every lux level meets one rule
 with one message, whichever way it came in.
@@ -52,13 +52,16 @@ class RecordingSettings:
         ``{kind: params}`` with kind a row of the sensor table (``"spad"``, ``"frames"``, ``"events"``, …) and
         the parameter dataclass of :func:`simspad.sensors.presets.sensor_params`.
     start_s, duration_s : float, optional
-        Interval to simulate, s; default from the first to the last keyframe.
+        Interval to simulate, s; default from the first to the last keyframe. A duration is checked on
+        construction (:func:`simspad.defaults.duration_problem`); both against the render's span by the
+        simulation, which has the render.
     seed : int or SeedSequence
-        Dataset seed; each sensor draws from ``child_rng(seed, *stream_key, kind)``.
+        Dataset seed; each sensor draws from ``child_rng(seed, *stream_key, kind)``. An integer is checked on
+        construction (:func:`simspad.defaults.seed_problem`).
     stream_key : tuple
         Stable key of this recording (e.g. ``(sequence, lux)``).
     gt_rate_hz : float
-        Ground-truth frame rate, Hz.
+        Ground-truth frame rate, Hz, checked on construction (:func:`simspad.defaults.gt_rate_problem`).
     optics : Optics, optional
         Lens and illuminant (None: ``Optics()``, filled in on construction).
     """
@@ -76,5 +79,11 @@ class RecordingSettings:
         problem = lux_problem(self.lux)
         if problem:
             raise SimSpadError(problem, field="lux")
+        if not isinstance(self.seed, np.random.SeedSequence) and (problem := defaults.seed_problem(self.seed)):
+            raise SimSpadError(problem, field="seed")
+        if problem := defaults.gt_rate_problem(self.gt_rate_hz):
+            raise SimSpadError(problem, field="gt_rate_hz")
+        if self.duration_s is not None and (problem := defaults.duration_problem(self.duration_s)):
+            raise SimSpadError(problem, field="duration_s")
         if self.optics is None:
             object.__setattr__(self, "optics", Optics())

@@ -49,7 +49,9 @@ class Sensor:
     name : str
         The kind (``"spad"``): the spec's ``[sensors.<name>]`` table, ``--sensors``, the recording's group.
     params : type
-        Frozen parameter dataclass (units in field names; a ``kind`` class variable equal to ``name``).
+        Frozen parameter dataclass (units in field names; a ``kind`` class variable equal to ``name``). The
+        built-in ones check their own fields when built (:mod:`simspad.sensors.presets`), so a dataset spec, the
+        CLI and the Python API share one rule and one message per field.
     presets : Mapping[str, object]
         Preset name → parameter instance.
     default_preset : str
@@ -57,8 +59,10 @@ class Sensor:
     layout : SensorLayout
         The group it writes (datasets, attributes, read view); ``layout.name == name``.
     validate : callable
-        ``validate(params, height_px)``: raise :class:`SimSpadError` naming the field for values the model cannot
-        use (run by ``simulate_recording`` before anything is written, and on every sequence of a spec).
+        ``validate(params, height_px)``: raise :class:`SimSpadError` naming the field for parameters that do not
+        fit an image of that height (the frame camera's rolling-shutter readout); the checks that need the
+        recording's size, run by ``simulate_recording`` before anything is written and on every sequence of a
+        spec. Rules of a field alone belong to the parameter record.
     simulate : callable
         ``simulate(writer, flux_tl, t0_s, t1_s, params, rng, *, lux, progress) -> dict | None``: write the group
         through the :class:`~simspad.io.recording.RecordingWriter` from the photon-irradiance timeline over
@@ -131,6 +135,10 @@ class Sensor:
 
 # -- the built-in rows --------------------------------------------------------------------------------------------
 
+def _no_size_rule(params, height: int) -> None:
+    """The SPAD's and the event camera's parameters fit any image size (their records checked every field)."""
+
+
 def _simulate_spad(writer, flux_tl, t0, t1, params, rng, *, lux, progress):
     return spad.simulate_spad(writer, flux_tl, t0, t1, params, rng, progress)
 
@@ -168,7 +176,7 @@ def _spad_gbit(params, width, height, duration_s) -> float:
 SPAD = Sensor(
     name="spad", params=SpadParams, presets=PRESETS["spad"],
     default_preset=DEFAULT_PRESET["spad"], layout=SPAD_LAYOUT,
-    validate=lambda params, height: spad.validate_params(params),
+    validate=_no_size_rule,
     simulate=_simulate_spad,
     describe=spad_describe.describe_spad, describe_attrs=spad_describe.DESCRIBE_ATTRS,
     rows=lambda params, duration_s: duration_s / params.bin_s, rate_field="bin_s",
@@ -190,7 +198,7 @@ FRAMES = Sensor(
 EVENTS = Sensor(
     name="events", params=EventParams, presets=PRESETS["events"],
     default_preset=DEFAULT_PRESET["events"], layout=EVENTS_LAYOUT,
-    validate=lambda params, height: events.validate_params(params),
+    validate=_no_size_rule,
     simulate=_simulate_events,
     describe=events_describe.describe_events, describe_attrs=events_describe.DESCRIBE_ATTRS,
     precheck=events.check_noise_work,

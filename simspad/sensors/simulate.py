@@ -111,9 +111,7 @@ def _interval(tl: Timeline, start_s, duration_s, render_dir) -> tuple[float, flo
     t0 = max(t0, tl.t_start)
     if duration_s is None:
         return t0, tl.t_end
-    d = float(duration_s)
-    if not (math.isfinite(d) and d > 0):
-        raise SimSpadError(f"must be a finite number > 0, got {duration_s!r}", field="duration_s")
+    d = float(duration_s)  # finite and > 0: the recording settings checked it
     if t0 + d > tl.t_end + _TIME_TOLERANCE_S:
         raise SimSpadError(f"start {t0!r} s + duration {d!r} s goes past the render's last keyframe at "
                            f"{tl.t_end!r} s", path=render_dir, field="duration_s")

@@ -7,19 +7,23 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from simspad.cli import main
+from simspad.defaults import duration_problem, gt_rate_problem, seed_problem
 from simspad.dataset.plan import make_plan
 from simspad.dataset.spec import SequenceSpec
 from simspad.dataset.spec_validation import spec_from_dict
 from simspad.errors import SimSpadError, SpecError
+from simspad.evaluate.recordings import RecordingEntry
 from simspad.io.render_dir import write_render_dir
 from simspad.io.results_dir import RESULT_COLUMNS, ResultRow, write_results_dir
 from simspad.render.settings import RenderSettings, resolution_problem
 from simspad.sensors.recording_settings import RecordingSettings, lux_problem
+from simspad.sensors.registry import SENSORS
 
 SPEC = {"name": "rec", "seed": 3, "lux": [10, 1000], "speed": [1, 4],
         "sequences": [{"scene": "siemens-star", "duration_s": 0.02, "resolution": [16, 12], "spp": 1}],
@@ -145,3 +149,149 @@ def test_results_rows_keep_their_columns_and_results_json_is_built_once(tmp_path
     assert (meta["format"], meta["kind"], meta["rate_hz"]) == ("simspad-results", "score", 1000.0)
     assert isinstance(meta["created_utc"], str) and meta["created_utc"].endswith("+00:00")
     assert [r["params"] for r in meta["results"]] == ["", None] and meta["results"][0]["ssim"] is None
+
+
+def _render_dir(tmp_path):
+    return write_render_dir(tmp_path / "r", np.array([0.0, 0.01]), np.ones((2, 4, 6, 3), np.float32)).parent
+
+
+def _simulate(tmp_path, *options) -> tuple[int, Path]:
+    out = tmp_path / "o" / "a.h5"
+    return main(["simulate", str(_render_dir(tmp_path)), "--lux", "10", *options, "--out", str(out)]), out.parent
+
+
+@pytest.mark.parametrize("rate", [0.0, -1.0, math.nan, math.inf])
+def test_a_bad_ground_truth_rate_gets_one_message_from_the_spec_the_cli_and_the_records(rate, tmp_path, capsys):
+    message = gt_rate_problem(rate)
+    assert message and "\n" not in message
+    assert _spec_errors(evaluation={"rate_hz": rate}) == [f"<spec>: evaluation.rate_hz: {message}"]
+    assert ("gt_rate_hz", message) in RenderSettings(duration_s=0.01, gt_rate_hz=rate).problems()
+    with pytest.raises(SimSpadError) as info:
+        RecordingSettings(lux=10.0, sensors={}, gt_rate_hz=rate)
+    assert (info.value.field, info.value.message) == ("gt_rate_hz", message)
+    # `simspad simulate --gt-rate` and `simspad render --gt-rate`: the same words, nothing written
+    code, written = _simulate(tmp_path, "--gt-rate", repr(rate))
+    assert code == 2 and capsys.readouterr().err == f"simspad: error: --gt-rate: {message}\n"
+    assert not written.exists()
+    out = tmp_path / "render"
+    assert main(["render", "siemens-star", "--duration", "0.001", "--gt-rate", repr(rate), "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"simspad: error: gt_rate_hz: {message}\n"
+    assert not out.exists()
+
+
+def test_a_rate_of_the_wrong_type_is_named_in_the_spec():
+    assert _spec_errors(evaluation={"rate_hz": "fast"}) == [f"<spec>: evaluation.rate_hz: {gt_rate_problem('fast')}"]
+    assert gt_rate_problem(1e-3) is None and gt_rate_problem(np.float64(250.0)) is None
+
+
+@pytest.mark.parametrize("seed", [-1, 2**64, 2**70])
+def test_a_bad_seed_gets_one_message_from_the_spec_the_cli_and_the_records(seed, tmp_path, capsys):
+    message = seed_problem(seed)
+    assert message == f"must be an integer in [0, 2**64), got {seed!r}"
+    # the spec used to accept any seed ≥ 0; one past 2**64 failed only when its first render started
+    assert _spec_errors(seed=seed) == [f"<spec>: seed: {message}"]
+    assert ("seed", message) in RenderSettings(duration_s=0.01, seed=seed).problems()
+    with pytest.raises(SimSpadError) as info:
+        RecordingSettings(lux=10.0, sensors={}, seed=seed)
+    assert (info.value.field, info.value.message) == ("seed", message)
+    code, written = _simulate(tmp_path, "--seed", str(seed))
+    assert code == 2 and capsys.readouterr().err == f"simspad: error: --seed: {message}\n"
+    assert not written.exists()
+    out = tmp_path / "render"
+    assert main(["render", "siemens-star", "--duration", "0.001", "--seed", str(seed), "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"simspad: error: seed: {message}\n"
+    assert not out.exists()
+
+
+def test_the_seed_rule_takes_every_uint64_and_nothing_else():
+    for good in (0, 2**64 - 1, np.uint64(2**64 - 1)):
+        assert seed_problem(good) is None
+        RecordingSettings(lux=10.0, sensors={}, seed=good)
+    assert spec_from_dict({**SPEC, "seed": 2**64 - 1}).seed == 2**64 - 1
+    for bad in ("seven", True, 1.0):
+        assert _spec_errors(seed=bad) == [f"<spec>: seed: {seed_problem(bad)}"]
+    RecordingSettings(lux=10.0, sensors={}, seed=np.random.SeedSequence(5))  # a SeedSequence is its own check
+
+
+@pytest.mark.parametrize("duration", [0.0, -1.0, math.nan, math.inf])
+def test_a_bad_duration_gets_one_message_from_the_spec_the_cli_and_the_records(duration, tmp_path, capsys):
+    message = duration_problem(duration)
+    seq = {**SPEC["sequences"][0], "duration_s": duration}
+    assert _spec_errors(sequences=[seq]) == [f"<spec>: sequences[0].duration_s: {message}"]
+    assert ("duration", message) in RenderSettings(duration_s=duration).problems()
+    with pytest.raises(SimSpadError) as info:
+        RecordingSettings(lux=10.0, sensors={}, duration_s=duration)
+    assert (info.value.field, info.value.message) == ("duration_s", message)
+    # `simspad simulate --duration`: refused with the rule's words before the output folder is made
+    code, written = _simulate(tmp_path, "--duration", repr(duration))
+    assert code == 2 and capsys.readouterr().err == f"simspad: error: --duration: {message}\n"
+    assert not written.exists()
+
+
+_BAD_PARAMS = [("spad", "qe", -1.0), ("spad", "qe", 2.0), ("spad", "dead_time_s", math.inf),
+               ("spad", "compression", "lz4"), ("spad", "gate_s", 1.0), ("spad", "min_gate_s", 1.0),
+               ("frames", "exposure_s", 0.5), ("frames", "bit_depth", 12.5), ("frames", "rgb", "yes please"),
+               ("events", "substep_tolerance", 1e-12), ("events", "dark_current_e_s", -3.0),
+               ("events", "hot_pixel_fraction", 1.5)]
+
+
+@pytest.mark.parametrize("kind, field, value", _BAD_PARAMS)
+def test_a_bad_sensor_parameter_gets_one_message_from_the_spec_the_cli_and_the_record(kind, field, value,
+                                                                                      tmp_path, capsys):
+    # the parameter record itself, built directly (the Python API)
+    with pytest.raises(SimSpadError) as info:
+        SENSORS[kind].params(**{field: value})
+    where, message = info.value.field, info.value.message
+    assert where == f"sensors.{kind}.{field}" and "\n" not in message and repr(value) in message
+    # the dataset spec: one line naming the field, with the record's words
+    assert _spec_errors(sensors={kind: {field: value}}) == [f"<spec>: {where}: {message}"]
+    # `simspad simulate --set`: the same line, before the output folder is made
+    code, written = _simulate(tmp_path, "--sensors", kind, "--set", f"{kind}.{field}={value}")
+    assert code == 2 and capsys.readouterr().err == f"simspad: error: {where}: {message}\n"
+    assert not written.exists()
+
+
+def test_the_sensor_models_trust_the_record_and_keep_only_the_size_rule(tmp_path):
+    # a good record passes every row's size check; the rolling-shutter readout is refused at the size that breaks it
+    for row in SENSORS.values():
+        if row.name in ("spad", "frames", "events"):
+            row.validate(row.presets[row.default_preset], 4096)
+    slow = SENSORS["frames"].params(rolling_shutter_line_s=1e-4)  # 10 ms frame period: 100 rows fit, 101 do not
+    SENSORS["frames"].validate(slow, 100)
+    with pytest.raises(SimSpadError) as info:
+        SENSORS["frames"].validate(slow, 102)
+    assert info.value.field == "sensors.frames.rolling_shutter_line_s"
+    # a spec whose sequence is too tall for it is refused up front, naming the field once
+    errors = _spec_errors(sensors={"frames": {"rolling_shutter_line_s": 1e-4}},
+                          sequences=[{**SPEC["sequences"][0], "resolution": [16, 120]}])
+    with pytest.raises(SimSpadError) as tall:
+        SENSORS["frames"].validate(slow, 120)
+    assert errors == [f"<spec>: sensors.frames.rolling_shutter_line_s: {tall.value.message}"]
+    # and so is `simspad simulate` on a render that tall, before anything is written
+    render = write_render_dir(tmp_path / "tall", np.array([0.0, 0.01]), np.ones((2, 120, 4, 3), np.float32)).parent
+    out = tmp_path / "o" / "a.h5"
+    assert main(["simulate", str(render), "--lux", "10", "--sensors", "frames", "--set",
+                 "frames.rolling_shutter_line_s=1e-4", "--out", str(out)]) == 2
+    assert not out.exists()
+
+
+def test_results_json_lists_recordings_with_one_builder():
+    entry = RecordingEntry(path=Path("/d/recordings/fan/a.h5"), rel="recordings/fan/a.h5", sequence="fan",
+                           scene="fan", lux=10.0, key="fan/10lx", speed_factor=2.0, image_speed_px_s=3.5,
+                           about={"trajectory": "fan.toml"})
+    base = {"recording": "recordings/fan/a.h5", "key": "fan/10lx", "sequence": "fan", "scene": "fan", "lux": 10.0,
+            "speed_factor": 2.0, "image_speed_px_s": 3.5, "trajectory": "fan.toml"}
+    assert entry.summary() == base  # `simspad score`
+    assert entry.summary(ground_truth=False, preview="previews/fan-10lx.png") == \
+        {**base, "ground_truth": False, "preview": "previews/fan-10lx.png"}  # `simspad evaluate`
+
+
+def test_results_json_created_utc_honours_source_date_epoch(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    for name in ("a", "b"):
+        write_results_dir(tmp_path / name, "score", [], [], [], {"rate_hz": 1000.0})
+    a, b = ((tmp_path / name / "results.json").read_bytes() for name in ("a", "b"))
+    assert a == b and json.loads(a)["created_utc"] == "2023-11-14T22:13:20+00:00"
+    monkeypatch.delenv("SOURCE_DATE_EPOCH")
+    write_results_dir(tmp_path / "c", "score", [], [], [], {})
+    assert json.loads((tmp_path / "c" / "results.json").read_text())["created_utc"].endswith("+00:00")

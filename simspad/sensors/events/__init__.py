@@ -21,7 +21,6 @@ from simspad.sensors.events.model import (
     draw_pixel_maps,
     sensor_current_1lux_e_s,
     sensor_photocurrent_e_s,
-    validate_params,
 )
 from simspad.sensors.events.simulator import (
     CHUNK_BYTES,
@@ -55,5 +54,4 @@ __all__ = [
     "simulate_events",
     "sort_events",
     "timestamps_us",
-    "validate_params",
 ]

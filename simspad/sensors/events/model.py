@@ -42,7 +42,6 @@ from typing import NamedTuple
 import numpy as np
 
 from simspad import defaults
-from simspad.errors import SimSpadError
 from simspad.physics.photoreceptor import photocurrent_e_s, reference_current_1lux, shot_noise_rate_hz
 from simspad.sensors.presets import EventParams
 
@@ -84,26 +83,6 @@ def draw_pixel_maps(params: EventParams, shape: tuple[int, int], rng: np.random.
     return PixelMaps(threshold_on=np.maximum(theta_on, params.threshold_min),
                      threshold_off=np.maximum(theta_off, params.threshold_min),
                      leak_rate_hz=leak, hot_rate_hz=hot, rng_state=seeds)
-
-
-def validate_params(params: EventParams) -> None:
-    """Raise :class:`SimSpadError` naming the field for values the model cannot use."""
-    checks = [
-        ("threshold_on", params.threshold_on > 0, "must be > 0"),
-        ("threshold_off", params.threshold_off > 0, "must be > 0"),
-        ("threshold_min", params.threshold_min > 0, "must be > 0 (thresholds may never reach 0)"),
-        ("qe", 0 < params.qe <= 1, "must be in (0, 1]"),
-        ("fill_factor", 0 < params.fill_factor <= 1, "must be in (0, 1]"),
-        ("pixel_pitch_m", params.pixel_pitch_m > 0, "must be > 0"),
-        ("photoreceptor_cutoff_hz_max", params.photoreceptor_cutoff_hz_max > 0, "must be > 0"),
-        ("hot_pixel_fraction", params.hot_pixel_fraction <= 1, "must be in [0, 1]"),
-        ("substep_tolerance", defaults.MIN_SUBSTEP_TOLERANCE <= params.substep_tolerance <= 0.1,
-         f"must be in [{defaults.MIN_SUBSTEP_TOLERANCE:g}, 0.1] (each tenfold cut costs ~3× the internal steps; "
-         "crossings have converged at 1e-5)"),
-    ]
-    for name, ok, message in checks:
-        if not ok:
-            raise SimSpadError(f"{message}, got {getattr(params, name)!r}", field=f"{_FIELD}.{name}")
 
 
 def noise_rates_hz(params: EventParams, lux: float, mean_ratio: float | None = None) -> tuple[float, float]:

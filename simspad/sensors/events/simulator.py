@@ -40,7 +40,6 @@ from simspad.sensors.events.model import (
     noise_work_problem,
     sensor_current_1lux_e_s,
     sensor_photocurrent_e_s,
-    validate_params,
 )
 from simspad.sensors.events.sort import EventColumns, merge_front, sort_segments
 from simspad.sensors.presets import EventParams, params_to_attrs
@@ -78,7 +77,6 @@ class EventSimulator:
     """
 
     def __init__(self, params: EventParams, shape, current0, t0: float, current_1lux: float, maps: PixelMaps):
-        validate_params(params)
         self.params = params
         self.shape = (int(shape[0]), int(shape[1]))
         n = self.shape[0] * self.shape[1]
@@ -266,7 +264,6 @@ def simulate_events(writer, flux_tl, t0: float, t1: float, params: EventParams, 
     dict
         The attrs written on ``/events``.
     """
-    validate_params(params)
     height, width = flux_tl.height, flux_tl.width
     maps = draw_pixel_maps(params, (height, width), rng)
     mean_flux = float(np.mean(flux_tl.keyframe(0), dtype=np.float64))

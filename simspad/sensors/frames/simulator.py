@@ -27,7 +27,6 @@ from simspad.sensors.frames.model import (
     expose,
     photons_per_pixel,
     resolve_exposure,
-    validate_params,
 )
 from simspad.sensors.presets import FrameParams, params_to_attrs
 
@@ -131,7 +130,6 @@ def simulate_frames(writer, flux_tl, t0: float, t1: float, params: FrameParams, 
     later) and recorded in the attrs with ``exposure_mode``.
     """
     height, width = flux_tl.height, flux_tl.width
-    validate_params(params, height)
     source = _keyframe_source(flux_tl, bool(params.rgb))
     first_flux = _sample(flux_tl, t0, source)
     exposure_s = resolve_exposure(params, first_flux)

@@ -13,9 +13,8 @@ from simspad.sensors.spad.model import (
     resolve_gate,
     spad_attrs,
     unpack_bits,
-    validate_params,
 )
 from simspad.sensors.spad.simulator import SpadChunker, chunk_bins, h5_chunk_bins, simulate_spad
 
 __all__ = ["SpadChunker", "auto_gate", "chunk_bins", "dcr_map", "h5_chunk_bins", "n_bins", "pack_bits",
-           "resolve_gate", "simulate_spad", "spad_attrs", "unpack_bits", "validate_params"]
+           "resolve_gate", "simulate_spad", "spad_attrs", "unpack_bits"]

@@ -24,7 +24,7 @@ from simspad.sensors.spad.kernel import (
     spad_chunk,
 )
 from simspad.sensors.spad.layout import KeyframeRing, chunk_layout
-from simspad.sensors.spad.model import dcr_map, n_bins, resolve_gate, spad_attrs, validate_params
+from simspad.sensors.spad.model import dcr_map, n_bins, resolve_gate, spad_attrs
 
 #: Target size of one streamed chunk of packed bits (bytes); bounds memory whatever the duration.
 CHUNK_BYTES = 16 << 20
@@ -178,7 +178,6 @@ def simulate_spad(writer, flux_tl, t0: float, t1: float, params: SpadParams, rng
     dict
         The attrs written on ``/spad`` (with the resolved gate).
     """
-    validate_params(params)
     H, W = flux_tl.height, flux_tl.width
     dcr = dcr_map((H, W), params, rng)
     q = params.detection_area_m2
