@@ -8,6 +8,7 @@ per binary frame, a conventional frame ``bit_depth`` bits per pixel per frame, a
 
 from __future__ import annotations
 
+import json
 import math
 
 from pathlib import Path
@@ -71,6 +72,8 @@ def describe_recording(path) -> str:
             lines.append(f"  motion      {_motion_text(a)}")
         if "render_noise_relative" in a:
             lines.append(f"  noise       {_render_noise_text(a)}")
+        if "render_convergence" in a:
+            lines.append(f"  radiance    {_convergence_text(a['render_convergence'])}")
         if rec.has("gt"):
             t = rec.gt.t
             rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
@@ -101,6 +104,18 @@ def _sensor_lines(rec, kind: str) -> list[str]:
     return [f"    {kind:<9} {headline}, {format_bytes(_group_bytes(rec.h5, kind))}",
             f"              {_attr_line(attrs, keys)}",
             *(f"              {line}" for line in details)]
+
+
+def _convergence_text(text) -> str:
+    """A converged render's mode and knobs (the ``render_convergence`` attribute, docs/format.md) in one line."""
+    try:
+        c = json.loads(text)
+    except (TypeError, ValueError):
+        return f"converged, unreadable settings {str(text)[:60]!r}"
+    if not isinstance(c, dict):
+        return f"converged, unreadable settings {str(text)[:60]!r}"
+    return (f"convergence {c.get('mode', '?')}: {c.get('cache_samples', '?')} irradiance estimates per cache point, "
+            f"{c.get('cache_probes', '?')} probe views, cells of {c.get('cache_cell_px', '?')} px")
 
 
 def _render_noise_text(a) -> str:

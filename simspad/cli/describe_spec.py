@@ -24,7 +24,10 @@ def describe_spec(path) -> str:
     for s in spec.sequences:
         traj = _short(s.trajectory) if s.trajectory is not None else _default_trajectory_text(s.scene)
         lines.append(f"    {s.name}: scene {_short(s.scene)}, {s.resolution[0]}×{s.resolution[1]} px, {s.spp} spp, "
-                     f"{s.start_s:g}–{s.start_s + s.duration_s:g} s, trajectory {traj}")
+                     f"{s.start_s:g}–{s.start_s + s.duration_s:g} s, trajectory {traj}"
+                     + (f", {s.interpolation} interpolation" if s.interpolation != "linear" else "")
+                     + (f", convergence {s.convergence} ({s.cache_samples} estimates per cache point)"
+                        if s.convergence != "off" else ""))
     lines.append("  sensors")
     for kind, sensor in spec.sensors.items():
         lines.append(f"    {kind}: preset {sensor.preset}{_overrides_text(sensor.overrides)}")

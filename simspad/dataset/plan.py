@@ -125,8 +125,9 @@ def shares_keyframes(seq) -> bool:
     """Whether the renders of ``seq`` at several speeds share keyframes: played k times faster from t = 0 the
     sequence passes through the slower one's poses, in 1/k of the time, so a faster render's first keyframes
     can be the slower render's files. Only linear renders from t = 0 (a later start plays a different part of
-    the trajectory at each speed; warp renders choose their own keyframes to render)."""
-    return float(seq.start_s) == 0.0 and seq.interpolation == "linear"
+    the trajectory at each speed; warp renders choose their own keyframes to render), path-traced (a converged
+    render lights its keyframes from its own irradiance cache, filled over its own span)."""
+    return float(seq.start_s) == 0.0 and seq.interpolation == "linear" and seq.convergence == "off"
 
 
 def _render_task(spec, seq, k: float, versions: dict, prefix: RenderTask | None = None) -> RenderTask:

@@ -39,7 +39,7 @@ from typing import Any
 
 from simspad import defaults
 from simspad.bundled import DATASETS_DIR, builtin_spec_path
-from simspad.render.settings import DEFAULT_INTERPOLATION, RenderSettings
+from simspad.render.settings import DEFAULT_CACHE_SAMPLES, DEFAULT_CONVERGENCE, DEFAULT_INTERPOLATION, RenderSettings
 from simspad.sensors.presets import params_to_attrs
 
 
@@ -68,6 +68,11 @@ class SequenceSpec:
     interpolation : str
         ``"linear"``: render every keyframe; ``"warp"``: render sparse keyframes and synthesize those between by
         reprojection, rendering for real where the warps disagree (:mod:`simspad.render.warp.schedule`).
+    convergence : str
+        ``"off"``: path-trace every keyframe at ``spp``; ``"cache"``: converge the diffuse light once per render
+        into an irradiance cache (:attr:`simspad.render.settings.RenderSettings.convergence`).
+    cache_samples : int
+        With ``"cache"``: irradiance estimates per point of the cache's probe views.
     """
 
     name: str
@@ -80,6 +85,8 @@ class SequenceSpec:
     max_flow_px: float = defaults.MAX_FLOW_PX
     min_rate_hz: float = defaults.MIN_KEYFRAME_RATE_HZ
     interpolation: str = DEFAULT_INTERPOLATION
+    convergence: str = DEFAULT_CONVERGENCE
+    cache_samples: int = DEFAULT_CACHE_SAMPLES
 
     def render_settings(self, seed: int, gt_rate_hz: float | None = defaults.GT_RATE_HZ) -> RenderSettings:
         """The sequence's render settings: the one mapping of its fields onto :class:`RenderSettings`.
@@ -93,15 +100,19 @@ class SequenceSpec:
         """
         return RenderSettings(duration_s=self.duration_s, start_s=self.start_s, resolution=tuple(self.resolution),
                               spp=self.spp, max_flow_px=self.max_flow_px, min_rate_hz=self.min_rate_hz, seed=seed,
-                              interpolation=self.interpolation, gt_rate_hz=gt_rate_hz)
+                              interpolation=self.interpolation, gt_rate_hz=gt_rate_hz,
+                              convergence=self.convergence, cache_samples=self.cache_samples)
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict of the fields (``interpolation`` only when it is not linear: the hashes of
-        specs written before the field existed stay as they were)."""
+        """Plain JSON-able dict of the fields (``interpolation`` only when it is not linear, ``convergence`` and
+        ``cache_samples`` only when convergence is not off: the hashes of specs written before the fields existed
+        stay as they were)."""
         d = dataclasses.asdict(self)
         d["resolution"] = list(self.resolution)
         if self.interpolation == "linear":
             del d["interpolation"]
+        if self.convergence == "off":  # (cache_samples then changes nothing rendered)
+            del d["convergence"], d["cache_samples"]
         return d
 
 

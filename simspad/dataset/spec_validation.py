@@ -22,7 +22,7 @@ from simspad.dataset.limits import spec_limit_problems
 from simspad.dataset.spec import DatasetSpec, EvaluationSpec, SensorSpec, SequenceSpec
 from simspad.dataset.speed import DEFAULT_SPEEDS, coverage_problem
 from simspad.errors import SimSpadError, SpecError
-from simspad.render.settings import DEFAULT_INTERPOLATION, RenderSettings
+from simspad.render.settings import DEFAULT_CACHE_SAMPLES, DEFAULT_CONVERGENCE, DEFAULT_INTERPOLATION, RenderSettings
 from simspad.io.trajectory_files import load_trajectory
 from simspad.methods.registry import available_methods, check_method_params
 from simspad.scenes.library import resolve_scene
@@ -31,7 +31,7 @@ from simspad.sensors.recording_settings import lux_problem
 
 _TOP_KEYS = ("name", "description", "seed", "output", "sequences", "lux", "sensors", "evaluation", "speed")
 _SEQ_KEYS = ("name", "scene", "trajectory", "duration_s", "start_s", "resolution", "spp", "max_flow_px",
-             "min_rate_hz", "interpolation")
+             "min_rate_hz", "interpolation", "convergence", "cache_samples")
 _EVAL_KEYS = ("rate_hz", "methods", "params")
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _MAX_NAME_CHARS = 100  # names become file names (255 bytes at most, with suffixes)
@@ -291,7 +291,9 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
               "resolution": t.get("resolution", list(defaults.RESOLUTION_PX)), "spp": t.get("spp", defaults.SPP),
               "max_flow_px": t.get("max_flow_px", defaults.MAX_FLOW_PX),
               "min_rate_hz": t.get("min_rate_hz", defaults.MIN_KEYFRAME_RATE_HZ),
-              "interpolation": t.get("interpolation", DEFAULT_INTERPOLATION)}
+              "interpolation": t.get("interpolation", DEFAULT_INTERPOLATION),
+              "convergence": t.get("convergence", DEFAULT_CONVERGENCE),
+              "cache_samples": t.get("cache_samples", DEFAULT_CACHE_SAMPLES)}
     # The render settings' own checks, bounds included: one rule and one message per field, for a spec as for
     # `simspad render` (a missing duration is reported above).
     for field_name, message in RenderSettings(**values, gt_rate_hz=None).problems():
@@ -307,7 +309,8 @@ def _validate_sequence(t: dict, where: str, base: Path, err: _Errors) -> tuple[s
     w, h = values["resolution"]
     return name, SequenceSpec(name=name, scene=scene, trajectory=trajectory, duration_s=duration, start_s=start,
                               resolution=(w, h), spp=values["spp"], max_flow_px=float(values["max_flow_px"]),
-                              min_rate_hz=float(values["min_rate_hz"]), interpolation=values["interpolation"])
+                              min_rate_hz=float(values["min_rate_hz"]), interpolation=values["interpolation"],
+                              convergence=values["convergence"], cache_samples=values["cache_samples"])
 
 
 def _check_scene(scene: str, base: Path, where: str, err: _Errors) -> str | None:

@@ -186,7 +186,7 @@ def layout_render(scene, trajectory, settings: RenderSettings, *, variant: str |
     flow_fn = predicted_flow_fn(ts, ms, near_depth_m)
     shared = ()  # instants of the prefix's keyframes, in this render's time
     if prefix is not None:
-        _check_prefix(prefix, width, height, spp, seed, t0, t1, prefix_time_scale)
+        _check_prefix(prefix, width, height, spp, seed, t0, t1, prefix_time_scale, settings.convergence)
         shared = np.asarray(prefix.times_s, dtype=np.float64) * prefix_time_scale
     n_shared = len(shared)
     own = keyframe_schedule(shared[-1] if n_shared else t0, t1, flow_fn, max_flow_px, min_rate_hz)[
@@ -252,11 +252,15 @@ def layout_render(scene, trajectory, settings: RenderSettings, *, variant: str |
 
 
 def _check_prefix(prefix: RenderLayout, width: int, height: int, spp: int, seed: int, t0: float, t1: float,
-                  scale: float) -> None:
-    """A prefix must be a linear render with this one's pixels-determining settings, starting where it starts."""
+                  scale: float, convergence: str = "off") -> None:
+    """A prefix must be a linear, path-traced render with this one's pixels-determining settings, starting where
+    it starts. Converged renders share nothing: each lights its keyframes from its own irradiance cache (built
+    from probe views over its own span), so a prefix's keyframes would be lit by another cache than the rest."""
     why = None
     if (prefix.width, prefix.height, prefix.spp, prefix.seed) != (width, height, spp, seed):
         why = "its size, samples per pixel or seed differ"
+    elif convergence != "off" or prefix.timeline.get("renderer", {}).get("convergence"):
+        why = "a converged render (convergence \"cache\") lights its keyframes from its own irradiance cache"
     elif prefix.warp is not None:  # (a prefix sharing its own first keyframes is fine: its files are all there)
         why = "only a linear render can be a prefix"
     elif not (scale > 0 and prefix.times_s[0] * scale == t0 and prefix.times_s[-1] * scale < t1):

@@ -45,6 +45,8 @@ DEFAULT_INTERPOLATION = "linear"
 #: anchors are converged keyframes and the warps are judged against a converged render's own noise.
 CONVERGENCE_MODES = ("off", "cache")
 DEFAULT_CONVERGENCE = "off"
+#: Default irradiance estimates per cache point (``cache_samples``; ``--cache-samples``, and a dataset spec's).
+DEFAULT_CACHE_SAMPLES = 256
 
 
 @dataclass(frozen=True)
@@ -109,7 +111,7 @@ class RenderSettings:
     warp_emission: bool = True
     gt_rate_hz: float | None = defaults.GT_RATE_HZ
     convergence: str = DEFAULT_CONVERGENCE
-    cache_samples: int = 256
+    cache_samples: int = DEFAULT_CACHE_SAMPLES
     cache_cell_px: float = 1.0
     cache_probes: int = 4
 
@@ -169,7 +171,8 @@ class RenderSettings:
             bad("gt_rate_hz", problem)
         if self.convergence not in CONVERGENCE_MODES:
             bad("convergence", f"must be one of {', '.join(CONVERGENCE_MODES)}, got {self.convergence!r}")
-        if not (isinstance(self.cache_samples, numbers.Integral) and 1 <= self.cache_samples <= 65536):
+        samples = self.cache_samples
+        if not (isinstance(samples, numbers.Integral) and not isinstance(samples, bool) and 1 <= samples <= 65536):
             bad("cache_samples", f"must be an integer in [1, 65536], got {self.cache_samples!r}")
         if not (isinstance(self.cache_cell_px, numbers.Real) and math.isfinite(self.cache_cell_px)
                 and 0.25 <= self.cache_cell_px <= 64):

@@ -155,6 +155,9 @@ def _root_attrs(tl: Timeline, render_dir, settings: RecordingSettings, *, t0, t1
         "spec": spec,
         "created_utc": created_utc(),
     }
+    convergence = tl.meta.get("renderer", {}).get("convergence")
+    if convergence:  # a converged render states its mode and knobs (a path-traced one's attributes stay as they were)
+        attrs["render_convergence"] = json.dumps(convergence, sort_keys=True)
     attrs.update(meta)
     return attrs
 

@@ -80,6 +80,7 @@ def test_a_bad_resolution_gets_one_message_from_the_spec_the_cli_and_the_record(
 @pytest.mark.parametrize("field, value", [("spp", 0), ("spp", 2.5), ("max_flow_px", -1.0), ("max_flow_px", 1e-9),
                                           ("min_rate_hz", math.inf), ("duration_s", 0.0), ("duration_s", "long"),
                                           ("start_s", math.nan), ("interpolation", "cubic"),
+                                          ("convergence", "mesh"), ("cache_samples", 0),
                                           ("resolution", [16000, 16000])])
 def test_a_bad_sequence_field_gets_the_render_settings_message(field, value):
     name = {"duration_s": "duration", "start_s": "start"}.get(field, field)
@@ -98,10 +99,12 @@ def test_a_negative_start_is_the_specs_own_rule():
 
 def test_every_field_a_sequence_shares_with_render_settings_is_carried_over():
     seq = SequenceSpec(name="s", scene="fan", trajectory=None, duration_s=0.25, start_s=0.5, resolution=(40, 30),
-                       spp=7, max_flow_px=0.75, min_rate_hz=123.0, interpolation="warp")
+                       spp=7, max_flow_px=0.75, min_rate_hz=123.0, interpolation="warp", convergence="cache",
+                       cache_samples=32)
     settings = seq.render_settings(seed=11, gt_rate_hz=250.0)
     shared = {f.name for f in dataclasses.fields(SequenceSpec)} & {f.name for f in dataclasses.fields(RenderSettings)}
-    assert shared == {"duration_s", "start_s", "resolution", "spp", "max_flow_px", "min_rate_hz", "interpolation"}
+    assert shared == {"duration_s", "start_s", "resolution", "spp", "max_flow_px", "min_rate_hz", "interpolation",
+                      "convergence", "cache_samples"}
     for name in shared:
         assert getattr(settings, name) == getattr(seq, name), name
     assert (settings.seed, settings.gt_rate_hz) == (11, 250.0)
