@@ -8,6 +8,13 @@ spec's sizes.
 - **Render time** per keyframe: a calibration render of a few keyframes of each scene along its own trajectory,
   on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
   traversal, depth pass, EXR write; variable part: path tracing).
+- **Converged renders** (``convergence = "cache"``, :mod:`simspad.render.converged`) pay two costs, calibrated
+  apart on the sequence's own settings: the irradiance cache's build, once per render, timed on its own and
+  scaled by ``cache_probes × W·H × cache_samples`` relative to the calibration's (:meth:`SceneRenderCost.
+  cache_build_seconds`); and each keyframe's (camera rays, glossy chain, cache lookups), timed after the build
+  with the cache already on disk, fitted as above. Their noise probe is path-traced (keyframe 0 at ``spp``), at the
+  scene's path-traced cost. Converged renders share no keyframes across speeds
+  (:func:`simspad.dataset.plan.shares_keyframes`), and the plan's layouts say so.
 - **Simulation time**: one throughput probe of the ground truth and of each of the spec's sensors on a small
   render, measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by each
   sensor's work units from its sensor-table row (:meth:`~simspad.sensors.registry.Sensor.work_units`: Gbit of
@@ -51,6 +58,8 @@ from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write
 from simspad.io.geometry import GEOMETRY_BYTES_PER_PX
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
+from simspad.render.converged import converged_renderer, layout_convergence
+from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import CUDA_VARIANT, cuda_device_name, select_variant
 from simspad.render.render_layout import chunk_size_for
 from simspad.render.renderer import (
@@ -137,16 +146,29 @@ class SceneRenderCost:
     rss_bytes_per_mp_spp: float | None  # peak-RSS growth with the sample wavefront
     process_rss_bytes: int | None  # peak RSS of the calibrating process (imports, scene, renders)
     load_s: float = 0.0  # CPU seconds to load the scene (once per chunk of keyframes)
+    #: Converged renders only: seconds of one irradiance-cache build in the calibration, and its size there
+    #: (megapixels × cache_probes × cache_samples: the irradiance estimates it makes, per million pixels)
+    cache_build_s: float = 0.0
+    cache_build_units: float = 0.0
 
     def seconds_per_keyframe(self, megapixels: float, spp: int) -> float:
         return self.a_s + self.b_s * megapixels * spp
+
+    def cache_build_seconds(self, megapixels: float, cache_probes: int, cache_samples: int) -> float:
+        """Seconds of one cache build of a render of ``megapixels`` (0 for a path-traced calibration): the
+        calibration's build scaled by the estimates it makes (one camera ray per pixel of each probe view, each
+        vertex found given ``cache_samples`` irradiance estimates)."""
+        if self.cache_build_units <= 0:
+            return 0.0
+        return self.cache_build_s * megapixels * cache_probes * cache_samples / self.cache_build_units
 
 
 @dataclass
 class UnitCosts:
     """Measured unit costs on this machine (one core each)."""
 
-    render: dict = field(default_factory=dict)  # scene name -> SceneRenderCost
+    render: dict = field(default_factory=dict)  # scene name -> SceneRenderCost (path tracing)
+    converged: dict = field(default_factory=dict)  # scene name -> SceneRenderCost of its converged renders
     gt_s_per_mp_frame: float = 0.0
     #: seconds and bytes per work unit of each sensor (its table row's ``work_units``: spad per Gbit, frames per
     #: MP·frame, events per MP·s, a row without a cost model per MP·row or MP·s)
@@ -164,16 +186,21 @@ class UnitCosts:
     render_variant: str = ""
 
 
-def _settings(seq, resolution, duration_s, spp) -> RenderSettings:
+def _settings(seq, resolution, duration_s, spp, converged: bool = False) -> RenderSettings:
     """``seq``'s render settings at a probe's size, span and samples, seed 1, every keyframe rendered (linear):
-    the unit costs are per rendered keyframe."""
-    return replace(seq.render_settings(seed=1), resolution=tuple(resolution), duration_s=duration_s, spp=spp,
-                   interpolation="linear")
+    the unit costs are per rendered keyframe. Path-traced unless ``converged`` (then ``seq``'s cache settings)."""
+    settings = replace(seq.render_settings(seed=1), resolution=tuple(resolution), duration_s=duration_s, spp=spp,
+                       interpolation="linear")
+    return settings if converged else replace(settings, convergence="off")
 
 
-def _calibrate_scene(seq, tmp: Path, gpu: str | None = None) -> SceneRenderCost:
+def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = False) -> SceneRenderCost:
     """Time :data:`CALIBRATION_KEYFRAMES` keyframes of ``seq``'s scene along its trajectory at two sample counts
-    (one scene load): on one CPU thread, or on the GPU ``gpu`` (its name) when the variant renders there."""
+    (one scene load): on one CPU thread, or on the GPU ``gpu`` (its name) when the variant renders there.
+
+    ``converged``: with ``seq``'s irradiance cache (its ``cache_samples`` and probe views). The cache is built on
+    its own first, timed (at the second sample count: the first pays the kernels' compilation), and the keyframes
+    are timed after it, with the cache on disk as a render's later chunks find it."""
     import drjit as dr  # deferred: heavy; the variant is already set
 
     on_gpu = gpu is not None
@@ -188,12 +215,21 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None) -> SceneRenderCost:
     cpu0 = time.process_time()
     loaded = load_scene(seq.scene, seq.trajectory, w, h, CALIBRATION_SPP[0])
     load_s = time.process_time() - cpu0  # every chunk of keyframes loads the scene once
-    points, exr, rss = [], [], []
+    points, exr, rss, build = [], [], [], (0.0, 0.0)
     for spp in CALIBRATION_SPP:
         loaded.ms.spp = spp  # mi.render takes the sample count per call; same scene, same film
-        plan = layout_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp), loaded=loaded)
+        plan = layout_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp, converged),
+                             loaded=loaded)
         picks = sorted({int(round(i)) for i in np.linspace(0, plan.n_keyframes - 1, CALIBRATION_KEYFRAMES + 1)})
-        out = tmp / f"cal-{spp}"
+        out = tmp / f"cal-{spp}{'-cache' if converged else ''}"
+        fields = layout_convergence(plan)
+        if fields is not None:
+            make_out_dir(out)
+            cpu0 = clock()
+            converged_renderer(plan, loaded.ms, loaded.ts, out)  # builds the cache and writes it into ``out``
+            build = (clock() - cpu0, w * h / 1e6 * fields["cache_probes"] * fields["cache_samples"])
+            (out / "t").mkdir()
+            shutil.copy2(out / fields["cache_file"], out / "t" / fields["cache_file"])  # the timed keyframes' too
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
         timed = picks[1:] or picks[:1]
         with _PeakRss() as peak:
@@ -209,7 +245,8 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None) -> SceneRenderCost:
     a = max(y1 - b * x1, 0.0)
     slope = None if None in rss else max(rss[1] - rss[0], 0) / (x2 - x1)
     return SceneRenderCost(a_s=a, b_s=b, exr_bytes_per_px=float(np.mean(exr)), rss_bytes_per_mp_spp=slope,
-                           process_rss_bytes=_vm_hwm_bytes(), load_s=load_s)
+                           process_rss_bytes=_vm_hwm_bytes(), load_s=load_s, cache_build_s=build[0],
+                           cache_build_units=build[1])
 
 
 def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:
@@ -319,6 +356,10 @@ def measure_unit_costs(spec, log=lambda msg: None) -> UnitCosts:
                 where = f" on the GPU ({costs.render_gpu})" if costs.render_gpu else ""
                 log(f"calibrating renders of {name}{where}")
                 costs.render[name] = _calibrate_scene(seq, tmp, costs.render_gpu)
+            if seq.convergence != "off" and name not in costs.converged:
+                log(f"calibrating converged renders of {name} (irradiance cache, {seq.cache_samples} estimates "
+                    "per point)")
+                costs.converged[name] = _calibrate_scene(seq, tmp, costs.render_gpu, converged=True)
         log("probing simulation throughput")
         _probe_simulation(spec, spec.sequences[0], tmp, costs)
     finally:
@@ -350,6 +391,9 @@ class Estimate:
     n_warp_keyframes: int = 0  # keyframes of renders with warp interpolation (costed as if all were rendered)
     n_shared_keyframes: int = 0  # keyframes a faster render shares with a slower one (linked, not counted)
     n_noise_probes: int = 0  # one extra keyframe render per render (the render-noise budget), in render_cpu_s
+    n_converged_renders: int = 0  # renders with an irradiance cache (convergence "cache")
+    cache_build_s: float = 0.0  # their caches' builds (one per render), in render_cpu_s
+    converged_keyframe_s: float = 0.0  # their keyframes after the build, in render_cpu_s
     #: None: renders run on CPU cores (``render_cpu_s`` is CPU-seconds); else the GPU's name (``render_cpu_s`` is
     #: seconds of that GPU, one render at a time per GPU)
     render_gpu: str | None = None
@@ -391,6 +435,7 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
     plan = make_plan(spec, "1970-01-01T00:00:00Z")
     keyframe_s, scene_load_s, render_cpu, renders_bytes, largest, render_rss = [], [], 0.0, 0, 0.0, None
     size_of, n_warp, n_shared, planned = {}, 0, 0, {}
+    n_converged, build_cpu, converged_kf_cpu = 0, 0.0, 0.0
     for r in plan.renders:
         seq = r.sequence
         # Retimed (a render at speed ×k plays its trajectory k times faster); keyframes shared with the slower
@@ -398,15 +443,27 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         rp = planned[r.rel_dir] = render_layout_of(r, planned)
         n = rp.n_keyframes - rp.n_shared
         n_shared += rp.n_shared
-        cost = costs.render[resolve_scene(seq.scene).name]
+        name = resolve_scene(seq.scene).name
+        cost = traced = costs.render[name]
         w, h = seq.resolution
+        fields = layout_convergence(rp)
+        build = 0.0
+        if fields is not None:  # the cache's build once per render, then every keyframe at its cost after it
+            cost = costs.converged[name]
+            build = cost.cache_build_seconds(w * h / 1e6, fields["cache_probes"], fields["cache_samples"])
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
         keyframe_s.append((per_kf, n))
         scene_load_s.append((cost.load_s, n))
         if rp.warp is not None:
             n_warp += n
-        render_cpu += per_kf * (n + 1)  # and its noise probe: keyframe 0 once more (the render-noise budget)
-        largest = max(largest, per_kf * (n + 1))
+        # and its noise probe: keyframe 0 once more, path-traced (the render-noise budget)
+        this = build + per_kf * n + traced.seconds_per_keyframe(w * h / 1e6, seq.spp)
+        if fields is not None:
+            n_converged += 1
+            build_cpu += build
+            converged_kf_cpu += per_kf * n
+        render_cpu += this
+        largest = max(largest, this)
         renders_bytes += int(cost.exr_bytes_per_px * w * h * (n + 1))
         # the geometry passes at the ground-truth instants (uncompressed float32 depth + uint16 instance per pixel)
         renders_bytes += GEOMETRY_BYTES_PER_PX * w * h * len(rp.timeline.get("geometry", {}).get("instants", ()))
@@ -440,7 +497,8 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
                     disk_bytes=int(rec_bytes) + renders_bytes, recordings_bytes=int(rec_bytes),
                     renders_bytes=renders_bytes, peak_render_rss_bytes=render_rss, peak_sim_rss_bytes=sim_rss,
                     cores=default_workers(), plan_s=plan_s, n_warp_keyframes=n_warp,
-                    n_shared_keyframes=n_shared, n_noise_probes=len(plan.renders), render_gpu=costs.render_gpu)
+                    n_shared_keyframes=n_shared, n_noise_probes=len(plan.renders), render_gpu=costs.render_gpu,
+                    n_converged_renders=n_converged, cache_build_s=build_cpu, converged_keyframe_s=converged_kf_cpu)
 
 
 def free_disk_bytes(path) -> int:
@@ -480,6 +538,9 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
                if est.n_warp_keyframes else []),
              *([f"               plus {est.n_shared_keyframes} keyframes the faster speeds share with the slower "
                 f"ones (the same poses: linked, not rendered)"] if est.n_shared_keyframes else []),
+             *([f"               {est.n_converged_renders} converged render(s) (irradiance cache): cache builds "
+                f"{hours(est.cache_build_s)} (one per render, × its W·H × cache_probes × cache_samples), their "
+                f"keyframes {hours(est.converged_keyframe_s)} after the build"] if est.n_converged_renders else []),
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",
              (f"  total        {est.render_cpu_s / 3600:.2f} GPU-h + {est.sim_cpu_s / 3600:.2f} CPU-h"
@@ -506,6 +567,11 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
     lines.append(f"  unit costs   render s/keyframe ({'the GPU' if est.render_gpu else 'one core'}): " + ", ".join(
         f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp (scene load {c.load_s:.1f} s per chunk)"
         for name, c in costs.render.items()))
+    if costs.converged:
+        lines.append("               converged: " + ", ".join(
+            f"{name} {c.a_s * 1e3:.0f} ms + {c.b_s:.3g} s per MP·spp after a cache build of "
+            f"{c.cache_build_s / max(c.cache_build_units, 1e-12):.3g} s per MP·probe·estimate"
+            for name, c in costs.converged.items()))
     sim = [f"{k} {v:.3g} s/{costs.sim_unit.get(k, 'unit')}" for k, v in costs.sim_s_per.items()]
     probed = f" (probed at {costs.sim_probe_px[0]}×{costs.sim_probe_px[1]} px)" if costs.sim_probe_px else ""
     lines.append("               " + ", ".join(sim + [f"gt {costs.gt_s_per_mp_frame:.3g} s/MP·frame"]) + probed)
