@@ -55,7 +55,7 @@ from simspad.dataset.executors import (
 )
 from simspad.dataset.plan import make_plan
 from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write_exr
-from simspad.io.geometry import GEOMETRY_BYTES_PER_PX
+from simspad.io.geometry import GEOMETRY_BYTES_PER_PX, read_geometry, write_geometry
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
 from simspad.render.converged import converged_renderer, layout_convergence
@@ -221,14 +221,14 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
         plan = layout_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp, converged),
                              loaded=loaded)
         picks = sorted({int(round(i)) for i in np.linspace(0, plan.n_keyframes - 1, CALIBRATION_KEYFRAMES + 1)})
-        out = tmp / f"cal-{spp}{'-cache' if converged else ''}"
+        out = tmp / (f"cal-{spp}" if not converged else f"cal-{resolve_scene(seq.scene).name}-{spp}-cache")
         fields = layout_convergence(plan)
         if fields is not None:
             make_out_dir(out)
             cpu0 = clock()
             converged_renderer(plan, loaded.ms, loaded.ts, out)  # builds the cache and writes it into ``out``
             build = (clock() - cpu0, w * h / 1e6 * fields["cache_probes"] * fields["cache_samples"])
-            (out / "t").mkdir()
+            (out / "t").mkdir(parents=True, exist_ok=True)
             shutil.copy2(out / fields["cache_file"], out / "t" / fields["cache_file"])  # the timed keyframes' too
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
         timed = picks[1:] or picks[:1]
@@ -322,10 +322,20 @@ def upsample_render_dir(src: Path, dst: Path, factor: int) -> Path:
     ``factor`` times (same instants, poses and metadata): a larger render of the same content, for timing."""
     meta = json.loads((Path(src) / TIMELINE_FILE).read_text())
     names = {"r": "R", "g": "G", "b": "B", "y": LUMINANCE_CHANNEL, "z": "Z", "object_id": OBJECT_ID_CHANNEL}
-    for kf in meta["keyframes"]:
-        data = read_exr(Path(src) / kf["file"], rgb_planes=True)
-        write_exr(Path(dst) / kf["file"], {names[k]: np.repeat(np.repeat(a, factor, 0), factor, 1)
-                                           for k, a in data.items()})
+
+    def up(a):
+        return np.repeat(np.repeat(a, factor, 0), factor, 1)
+
+    # the keyframes, the render-noise budget's probe (a recording states the budget from it) and the geometry
+    # passes at the ground-truth instants
+    probe = meta.get("render_noise", {}).get("probe_file")
+    for rel in [kf["file"] for kf in meta["keyframes"]] + ([probe] if probe else []):
+        data = read_exr(Path(src) / rel, rgb_planes=True)
+        write_exr(Path(dst) / rel, {names[k]: up(a) for k, a in data.items()})
+    for instant in meta.get("geometry", {}).get("instants", ()):
+        depth_z, instance = read_geometry(Path(src) / instant["file"], meta["width"], meta["height"])
+        (Path(dst) / instant["file"]).parent.mkdir(parents=True, exist_ok=True)
+        write_geometry(Path(dst) / instant["file"], up(depth_z), up(instance))
     meta.update(width=meta["width"] * factor, height=meta["height"] * factor)
     write_timeline_json(dst, **meta)
     return Path(dst)
