@@ -59,6 +59,7 @@ from simspad.render.mitsuba_env import select_variant
 from simspad.render.render_layout import RenderLayout
 from simspad.render.geometry import missing_geometry, owned_instants
 from simspad.render.renderer import (
+    build_convergence_cache,
     link_shared_keyframes,
     load_scene,
     layout_render,
@@ -148,6 +149,9 @@ def run_render_layout(task, out_dir: str, env: dict[str, str]) -> LayoutResult |
         layout = render_layout_of(task)
         make_out_dir(final)
         existing = tuple(i for i, name in enumerate(layout.names) if (final / name).is_file())
+        if layout.timeline.get("renderer", {}).get("convergence") and len(existing) < layout.n_keyframes:
+            # One irradiance cache per render, built before the chunks start (they would each build it).
+            build_convergence_cache(layout, _cached_scene(task.sequence, task.speed_factor, layout), final)
         return LayoutResult(layout=layout, existing=existing, seconds=time.perf_counter() - t0,
                             host=socket.gethostname())
     except BaseException as exc:  # noqa: BLE001 - reported to the driver, which marks the recordings failed

@@ -48,6 +48,7 @@ from simspad.render.converged import (
     CHAIN_VERTICES,
     LEVELS,
     converged_renderer,
+    layout_convergence,
 )
 from simspad.render.flow import (
     camera_poses,
@@ -293,6 +294,23 @@ def link_shared_keyframes(layout: RenderLayout, indices, prefix_dir, out_dir) ->
             os.replace(tmp, dst)
         n += 1
     return n
+
+
+def build_convergence_cache(layout: RenderLayout, loaded: LoadedScene, out_dir) -> bool:
+    """Build a converged ``layout``'s irradiance cache into the render directory ``out_dir`` unless it is there.
+
+    ``simspad generate`` runs this in a render's layout job, before any keyframe chunk starts: the chunks, in
+    other workers, then read the one cache instead of each building it (the values are the same in any process,
+    so this changes no byte; it changes how often the build is paid). Returns True when it built the cache now;
+    False for a path-traced layout or a cache already there.
+    """
+    fields = layout_convergence(layout)
+    if fields is None or (Path(out_dir) / fields["cache_file"]).is_file():
+        return False
+    _check_same_inputs(layout, loaded)
+    make_out_dir(out_dir)
+    converged_renderer(layout, loaded.ms, loaded.ts, out_dir)
+    return True
 
 
 def render_keyframes(scene, trajectory, layout: RenderLayout, indices, *, out_dir, progress: bool = False,

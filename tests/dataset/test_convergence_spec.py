@@ -150,3 +150,23 @@ def test_a_path_traced_recording_has_no_convergence_attribute(tmp_path):
                              RecordingSettings(lux=100.0, sensors={"events": sensor_params("events")}))
     with h5py.File(out, "r") as f:
         assert "render_convergence" not in f.attrs
+
+
+def test_a_converged_render_builds_its_cache_once_in_the_layout_job(tmp_path):
+    """``simspad generate`` lays a render out in one job, then spreads its keyframes over workers: the layout job
+    builds the irradiance cache, so no chunk in another worker finds it missing and builds its own."""
+    from simspad.dataset.executors import job_environment, run_render_layout, run_render_chunk
+    from simspad.dataset.jobs import LayoutResult
+
+    spec = spec_from_dict(_with(convergence="cache", cache_samples=4), source_path=tmp_path / "conv.toml")
+    task = make_plan(spec, tmp_path).renders[0]
+    res = run_render_layout(task, str(tmp_path), job_environment())
+    assert isinstance(res, LayoutResult), res
+    final = tmp_path / task.rel_dir
+    cache_file = final / res.layout.timeline["renderer"]["convergence"]["cache_file"]
+    assert cache_file.is_file()  # before any keyframe is rendered
+    assert not any((final / name).is_file() for name in res.layout.names)
+    built = cache_file.stat().st_mtime_ns
+    run_render_chunk(task, res.layout, (0, 1), str(tmp_path), job_environment())
+    assert cache_file.stat().st_mtime_ns == built  # the chunk read it
+    assert all((final / name).is_file() for name in res.layout.names[:2])
