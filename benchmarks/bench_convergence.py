@@ -124,9 +124,19 @@ def star_mtf(lum: np.ndarray, ref_lum: np.ndarray, geometry: tuple) -> dict:
         absolute.add(img)
         curves.append(metrics.mtf_siemens(img, ref, geometry=geometry))
     freq = curves[0][0]
-    with np.errstate(invalid="ignore"):
-        relative = np.nanmean(np.stack([m for _, m in curves]), axis=0)
-    return {"vs_print": star_figures(absolute.result()), "vs_reference": star_figures((freq, relative))}
+    stacked = np.stack([m for _, m in curves])
+    # circles where the reference shows too little of the star are NaN in every keyframe
+    relative = np.array([np.nan if np.isnan(col).all() else np.nanmean(col) for col in stacked.T])
+    vs_print = star_figures(absolute.result())
+    # The outermost circles can lie on the star's rim (the located radius is half the frame's smaller side), where
+    # the modulation is low and MTF50 reads NaN; the curve's crossing of 0.5 with those circles (below half the
+    # curve's peak, at the low-frequency end) left out:
+    f, m = absolute.result()
+    rim = 0
+    while rim < m.size and not m[rim] >= 0.5 * np.nanmax(m):
+        rim += 1
+    vs_print["mtf50_on_star_cyc_px"] = metrics.mtf50(f[rim:], m[rim:])
+    return {"vs_print": vs_print, "vs_reference": star_figures((freq, relative))}
 
 
 def measure(tl: Timeline, cpu_s: float, ref_lum: np.ndarray, ref_events: dict, ref_pair=None, few=None,
