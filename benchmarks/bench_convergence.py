@@ -217,7 +217,8 @@ def bench_scene(name: str, base: RenderSettings, ref_spp: int, spps: list[int], 
         _print(label, f"brute force {spp} spp", row)
     for run in cache_runs:
         method = f"cache {run['spp']} spp, {run['cache_samples']} q, {run['interpolation']}"
-        tl, cpu = timed(replace(base, convergence="cache", **run), work / f"{label}-cache{run['spp']}-{run['interpolation']}")
+        tl, cpu = timed(replace(base, convergence="cache", **run),
+                        work / f"{label}-cache{run['spp']}-{run['interpolation']}")
         out["methods"][method] = row = measure(tl, cpu, ref_lum, ref_events, (lum0, lum1), few, star)
         _print(label, method, row)
     return out
