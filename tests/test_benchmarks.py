@@ -11,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
@@ -68,11 +69,42 @@ def test_bench_convergence_measures_brute_force_and_the_cache_against_a_referenc
     out, table = tmp_path / "wp.png", tmp_path / "wp.json"
     res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_convergence.py"), "--scenes", "siemens-star",
                           "--resolution", "16x12", "--duration", "0.002", "--ref-spp", "64", "--spp", "16",
-                          "--cache-spp", "4", "--cache-samples", "16", "--out", str(out), "--json", str(table)],
+                          "--cache-spp", "4", "--cache-samples", "16", "--out", str(out), "--json", str(table),
+                          "--trajectory", str(BENCHMARKS.parent / "trajectories" / "siemens-star.toml"), "--speed", "2",
+                          "--few-ref-spp", "32", "--few-ref-keyframes", "2", "--mtf"],
                          capture_output=True, text=True, timeout=600, env=child_env)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     (result,) = json.loads(table.read_text())
+    assert result["scene"] == "siemens-star-x2"
     assert set(result["methods"]) == {"brute force 16 spp", "cache 4 spp, 16 q, linear"}
+    assert result["few_ref"]["spp"] == 32 and result["few_ref"]["keyframes"][0] == 0
+    assert len(result["few_ref"]["keyframes"]) == 2 and result["ref_mtf"]["mean"]["vs_reference"]
     for row in result["methods"].values():
         assert row["cpu_s"] > 0 and 0 < row["median_error"] < 1 and len(row["event_ratio_100"]) == 2
+        assert 0 < row["median_error_few_ref"] < 1 and set(row["mtf"]) == {"vs_print", "vs_reference"}
     assert out.stat().st_size > 10_000
+
+
+def test_bench_convergence_star_mtf_is_one_against_itself_and_falls_with_blur(monkeypatch):
+    # The --mtf columns of bench_convergence on a drawn star (24 cycles, 128x96): a render identical to the
+    # reference scores 1 against it, a blurred one (Gaussian, sigma 1 px) far less, against the print too.
+    from scipy.ndimage import gaussian_filter
+
+    from simspad.evaluate import metrics
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from bench_convergence import star_mtf  # deferred: a script of benchmarks/, importable only from there
+
+    y, x = np.mgrid[0:96, 0:128].astype(float)
+    r, theta = np.hypot(y - 47.5, x - 63.5), np.arctan2(y - 47.5, x - 63.5)
+    sharp = np.where(r < 45, 0.05 + 0.75 * (np.sin(24 * theta) > 0), 0.4)
+    blurred = gaussian_filter(sharp, 1.0)
+    geometry = metrics.siemens_star_geometry(sharp)
+    assert geometry[2] == 24 and abs(geometry[0] - 47.5) < 1 and abs(geometry[1] - 63.5) < 1
+    same, blur = star_mtf(sharp[None], sharp[None], geometry), star_mtf(blurred[None], sharp[None], geometry)
+    assert same["vs_reference"]["mtf_at_0p25_cyc_px"] == pytest.approx(1.0)
+    assert same["vs_reference"]["mtf_at_0p40_cyc_px"] == pytest.approx(1.0)
+    assert blur["vs_reference"]["mtf_at_0p25_cyc_px"] < 0.5 and blur["vs_reference"]["mtf_at_0p40_cyc_px"] < 0.1
+    assert 0.1 < blur["vs_reference"]["mtf50_cyc_px"] < 0.25
+    for f in ("mtf_at_0p25_cyc_px", "mtf_at_0p40_cyc_px"):
+        assert blur["vs_print"][f] < 0.5 * same["vs_print"][f]
