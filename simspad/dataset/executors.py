@@ -393,6 +393,19 @@ def check_scheduler_answers(address: str, timeout_s: float) -> None:
     import asyncio  # deferred: only this check runs an event loop of its own
 
     from distributed.comm import connect  # deferred: dask is needed only by --executor dask
+    from distributed.comm.addressing import parse_address, parse_host_port  # deferred: as above
+
+    scheme, location = parse_address(address)
+    if scheme == "tcp":
+        # A plain connect first: distributed's connect retries a refusal until its timeout, and on a busy machine the
+        # wait below could expire during a retry's back-off and report a refused address as one that did not answer.
+        try:
+            socket.create_connection(parse_host_port(location), timeout=timeout_s).close()
+        except ConnectionRefusedError:
+            raise SimSpadError(f"nothing accepts connections at {address} (refused): is the Dask scheduler running, "
+                               "and is this its address?", field="--scheduler") from None
+        except (OSError, ValueError):
+            pass  # unreachable or slow: the handshake below says which, within the same timeout
 
     async def handshake():
         comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s)

@@ -322,13 +322,28 @@ def test_generate_against_a_silent_scheduler_times_out_with_one_line(simspad_cli
     assert elapsed < REFUSAL_S, elapsed
 
 
+def _free_port_below_the_ephemeral_range() -> int:
+    """A free port outside the kernel's ephemeral range: a connection to a free port inside it can, rarely, be
+    given that very port as its source and connect to itself (TCP self-connect), which is not a refusal."""
+    try:
+        low = int(open("/proc/sys/net/ipv4/ip_local_port_range").read().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    for port in range(low - 1, 1024, -1):
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    pytest.skip("no free port below the ephemeral range")
+
+
 def test_scheduler_probe_errors(monkeypatch):
     from simspad.dataset.executors import check_scheduler_answers, dask_connect_timeout_s
     from simspad.errors import SimSpadError
 
-    with socket.socket() as s:  # a port nothing listens on: refused, not "did not answer"
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = _free_port_below_the_ephemeral_range()  # nothing listens there: refused, not "did not answer"
     with pytest.raises(SimSpadError, match="nothing accepts connections"):
         check_scheduler_answers(f"tcp://127.0.0.1:{port}", 1.0)
     monkeypatch.delenv("SIMSPAD_DASK_CONNECT_TIMEOUT_S", raising=False)
