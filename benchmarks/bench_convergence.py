@@ -80,7 +80,10 @@ def render_timed(scene, settings: RenderSettings, out: Path, keep: bool = False,
     cpu_file = out / "bench-cpu-s.txt"
     if keep and (out / "timeline.json").is_file() and cpu_file.is_file():
         return Timeline.open(out), float(cpu_file.read_text())
-    shutil.rmtree(out, ignore_errors=True)
+    if out.exists():  # only a render folder (this benchmark's, from an earlier run) is replaced
+        if any(out.iterdir()) and not (cpu_file.is_file() or (out / "frames").is_dir()):
+            raise SystemExit(f"{out}: exists and is not a render of this benchmark; choose another --work")
+        shutil.rmtree(out)
     tic = time.process_time()
     render_sequence(scene, trajectory, settings, out_dir=out, progress=False)
     cpu_s = time.process_time() - tic

@@ -163,23 +163,34 @@ def _simulate(tmp_path, *options) -> tuple[int, Path]:
     return main(["simulate", str(_render_dir(tmp_path)), "--lux", "10", *options, "--out", str(out)]), out.parent
 
 
+def _one_message_everywhere(tmp_path, capsys, message, *, render_field, render_kwargs, record_field,
+                            record_kwargs, option, value, render_option=None):
+    """The spec's error, the render and recording records' problem, ``simspad simulate OPTION`` (and, given
+    ``render_option``, ``simspad render OPTION``) all state ``message``; the commands write nothing."""
+    assert (render_field, message) in RenderSettings(**render_kwargs).problems()
+    with pytest.raises(SimSpadError) as info:
+        RecordingSettings(lux=10.0, sensors={}, **record_kwargs)
+    assert (info.value.field, info.value.message) == (record_field, message)
+    code, written = _simulate(tmp_path, option, value)
+    assert code == 2 and capsys.readouterr().err == f"simspad: error: {option}: {message}\n"
+    assert not written.exists()
+    if render_option is not None:
+        out = tmp_path / "render"
+        assert main(["render", "siemens-star", "--duration", "0.001", render_option, value, "--out", str(out)]) == 2
+        assert capsys.readouterr().err == f"simspad: error: {render_field}: {message}\n"
+        assert not out.exists()
+
+
 @pytest.mark.parametrize("rate", [0.0, -1.0, math.nan, math.inf])
 def test_a_bad_ground_truth_rate_gets_one_message_from_the_spec_the_cli_and_the_records(rate, tmp_path, capsys):
     message = gt_rate_problem(rate)
     assert message and "\n" not in message
     assert _spec_errors(evaluation={"rate_hz": rate}) == [f"<spec>: evaluation.rate_hz: {message}"]
-    assert ("gt_rate_hz", message) in RenderSettings(duration_s=0.01, gt_rate_hz=rate).problems()
-    with pytest.raises(SimSpadError) as info:
-        RecordingSettings(lux=10.0, sensors={}, gt_rate_hz=rate)
-    assert (info.value.field, info.value.message) == ("gt_rate_hz", message)
     # `simspad simulate --gt-rate` and `simspad render --gt-rate`: the same words, nothing written
-    code, written = _simulate(tmp_path, "--gt-rate", repr(rate))
-    assert code == 2 and capsys.readouterr().err == f"simspad: error: --gt-rate: {message}\n"
-    assert not written.exists()
-    out = tmp_path / "render"
-    assert main(["render", "siemens-star", "--duration", "0.001", "--gt-rate", repr(rate), "--out", str(out)]) == 2
-    assert capsys.readouterr().err == f"simspad: error: gt_rate_hz: {message}\n"
-    assert not out.exists()
+    _one_message_everywhere(tmp_path, capsys, message, render_field="gt_rate_hz",
+                            render_kwargs={"duration_s": 0.01, "gt_rate_hz": rate}, record_field="gt_rate_hz",
+                            record_kwargs={"gt_rate_hz": rate}, option="--gt-rate", value=repr(rate),
+                            render_option="--gt-rate")
 
 
 def test_a_rate_of_the_wrong_type_is_named_in_the_spec():
@@ -193,17 +204,9 @@ def test_a_bad_seed_gets_one_message_from_the_spec_the_cli_and_the_records(seed,
     assert message == f"must be an integer in [0, 2**64), got {seed!r}"
     # the spec used to accept any seed ≥ 0; one past 2**64 failed only when its first render started
     assert _spec_errors(seed=seed) == [f"<spec>: seed: {message}"]
-    assert ("seed", message) in RenderSettings(duration_s=0.01, seed=seed).problems()
-    with pytest.raises(SimSpadError) as info:
-        RecordingSettings(lux=10.0, sensors={}, seed=seed)
-    assert (info.value.field, info.value.message) == ("seed", message)
-    code, written = _simulate(tmp_path, "--seed", str(seed))
-    assert code == 2 and capsys.readouterr().err == f"simspad: error: --seed: {message}\n"
-    assert not written.exists()
-    out = tmp_path / "render"
-    assert main(["render", "siemens-star", "--duration", "0.001", "--seed", str(seed), "--out", str(out)]) == 2
-    assert capsys.readouterr().err == f"simspad: error: seed: {message}\n"
-    assert not out.exists()
+    _one_message_everywhere(tmp_path, capsys, message, render_field="seed",
+                            render_kwargs={"duration_s": 0.01, "seed": seed}, record_field="seed",
+                            record_kwargs={"seed": seed}, option="--seed", value=str(seed), render_option="--seed")
 
 
 def test_the_seed_rule_takes_every_uint64_and_nothing_else():
@@ -221,14 +224,10 @@ def test_a_bad_duration_gets_one_message_from_the_spec_the_cli_and_the_records(d
     message = duration_problem(duration)
     seq = {**SPEC["sequences"][0], "duration_s": duration}
     assert _spec_errors(sequences=[seq]) == [f"<spec>: sequences[0].duration_s: {message}"]
-    assert ("duration", message) in RenderSettings(duration_s=duration).problems()
-    with pytest.raises(SimSpadError) as info:
-        RecordingSettings(lux=10.0, sensors={}, duration_s=duration)
-    assert (info.value.field, info.value.message) == ("duration_s", message)
     # `simspad simulate --duration`: refused with the rule's words before the output folder is made
-    code, written = _simulate(tmp_path, "--duration", repr(duration))
-    assert code == 2 and capsys.readouterr().err == f"simspad: error: --duration: {message}\n"
-    assert not written.exists()
+    _one_message_everywhere(tmp_path, capsys, message, render_field="duration",
+                            render_kwargs={"duration_s": duration}, record_field="duration_s",
+                            record_kwargs={"duration_s": duration}, option="--duration", value=repr(duration))
 
 
 _BAD_PARAMS = [("spad", "qe", -1.0), ("spad", "qe", 2.0), ("spad", "dead_time_s", math.inf),
