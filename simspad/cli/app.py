@@ -110,7 +110,7 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
               help="off: path-trace every pixel of every keyframe at --spp; cache (experimental): converge the diffuse "
                    "light once into a world-space irradiance cache and trace only --spp camera rays per pixel through "
                    "their glossy bounces (docs/rendering.md, converged radiance).")
-@click.option("--cache-samples", type=int, default=256, show_default=True,
+@click.option("--cache-samples", type=int, default=1024, show_default=True,
               help="With --convergence cache: irradiance estimates per point of the cache's probe views.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
               help="Render directory: new, empty, or a render directory (its cached keyframes are re-used).")

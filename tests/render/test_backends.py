@@ -109,9 +109,9 @@ def test_every_sample_count_is_rendered_as_asked():
         sensor = mi.load_dict({"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4},
                                "sampler": {"type": sampler_for(spp), "sample_count": spp}})
         assert honoured_spp(sensor) == spp, (spp, sampler_for(spp))
-    # the default and the paper's spp keep the low-discrepancy sampler (their bytes do not change)
+    # the default and the paper's spp are stratified (multi-jittered), not Mitsuba's biased low-discrepancy sampler
     assert [sampler_for(n) for n in (1, 2, 4, 8, 16, 64, 256)] == [
-        "independent", "independent", "ldsampler", "independent", "ldsampler", "ldsampler", "ldsampler"]
+        "independent", "independent", "multijitter", "independent", "multijitter", "multijitter", "multijitter"]
 
 
 def test_one_spp_renders_one_sample_without_mitsuba_noise_on_stderr(simspad_cli, tmp_path):
@@ -143,10 +143,10 @@ def _cli_args(scene, out):
 @pytest.mark.parametrize("scene", sorted(builtin_scene_names()))
 def test_scalar_fallback_renders_every_builtin_scene_with_llvms_statistics(simspad_cli, tmp_path, scene):
     """Without libLLVM (``DRJIT_LIBLLVM_PATH=/nonexistent``) every built-in scene renders with ``scalar_rgb``, says so
-    once, and keyframe 0 agrees with LLVM's (32×24 px, 64 spp): image mean luminance within 3 %, and every 8×8 px
-    block within the larger of 10 % and 1.5× the largest difference two LLVM seeds show between a block's values. The two variants draw
-    different random numbers, so only statistics can agree (measured: means within 1.1 %, blocks within 22 % on the
-    office's and 14 % on the plant's noisy blocks, where two LLVM seeds differ by 21 % and 20 %)."""
+    once, and keyframe 0 agrees with LLVM's (32×24 px, 64 spp): image mean luminance within 3 %, and its 8×8 px
+    blocks' mean absolute log ratio to LLVM's within the larger of 5 % and 1.5× that of two LLVM seeds. The two
+    variants draw different random numbers, so only statistics can agree (measured with multi-jittered samples:
+    0.9–1.4× the seeds' spread on every scene, e.g. office 6.7 % against 7.5 %, plant 3.8 % against 3.6 %)."""
     if select_variant() != LLVM_VARIANT:
         pytest.skip("no LLVM backend here to compare with")
     proc = simspad_cli.run(*_cli_args(scene, tmp_path / "scalar"), env={"DRJIT_LIBLLVM_PATH": "/nonexistent"})
@@ -165,9 +165,10 @@ def test_scalar_fallback_renders_every_builtin_scene_with_llvms_statistics(simsp
     scalar = _block_luminance(tmp_path / "scalar")
     assert np.all(np.isfinite(scalar)) and scalar.min() >= 0
     assert abs(scalar.mean() / llvm[0].mean() - 1) < 0.03, (scalar.mean(), llvm[0].mean())
-    seed_spread = float(np.abs(llvm[1] / llvm[0] - 1).max())
-    worst = float(np.abs(scalar / llvm[0] - 1).max())
-    assert worst <= max(0.10, 1.5 * seed_spread), (worst, seed_spread)
+    # Over the 12 blocks, not the worst one: the largest of 12 noisy ratios is itself too noisy a statistic.
+    seed_spread = float(np.abs(np.log(llvm[1] / llvm[0])).mean())
+    spread = float(np.abs(np.log(scalar / llvm[0])).mean())
+    assert spread <= max(0.05, 1.5 * seed_spread), (spread, seed_spread)
 
 
 # ------------------------------------------------------------------------------------- the estimate's workers
