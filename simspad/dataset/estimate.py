@@ -79,7 +79,7 @@ from simspad.sensors.simulate import RecordingSettings, simulate_recording
 #: span (s) of the trajectory the keyframes are taken from.
 CALIBRATION_WIDTH_PX = 64
 CALIBRATION_KEYFRAMES = 2
-CALIBRATION_SPP = (4, 64)  # powers of four: the low-discrepancy sampler takes them as they are
+CALIBRATION_SPP = (4, 64)  # powers of four: the stratified (multi-jittered) sampler, as renders at these counts
 CALIBRATION_SPAN_S = 0.02
 #: Throughput probe: size (px) and the two simulated durations (s) whose difference gives marginal costs. 40 ms
 #: between them: with 16 ms, an event camera's marginal cost on 64 × 48 px (~30 ms of CPU) was within the noise of

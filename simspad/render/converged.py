@@ -18,7 +18,9 @@ those views find gets ``q_samples`` estimates of Q by next-event estimation plus
 by Mitsuba's own path integrator (multiple importance sampling between the two), and each cell keeps their
 mean. A keyframe's lookup interpolates trilinearly between the cells around a point, at the finest of
 :data:`LEVELS` that has them, else in the cells of the next-closest normal bins; a vertex no cell covers gets its
-own Q estimate then (``fallback_samples``).
+own Q estimate then (``fallback_samples``). The finest level is looked up inside a Dr.Jit kernel, on every lane of
+the chain, from an open-addressing copy of its cells (:meth:`IrradianceCache.open_table`); only the vertices it
+leaves without light are read back to numpy for the rest.
 
 What stays is a per-surface bias (the cache's cell size smooths irradiance, e.g. contact shadows, over a few
 pixels) and the cache's own noise, which is fixed to the surfaces and moves with them like texture instead of
@@ -115,6 +117,31 @@ class IrradianceCache:
             cache.values[level] = sums / w[:, None]
             cache.counts[level] = w.astype(np.int64)
         return cache
+
+    def open_table(self, level: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """The cells of ``level`` as an open-addressing hash table for a lookup inside a Dr.Jit kernel (which has
+        no binary search): (keys [C] uint64, 0 = empty; values [C, 3] float32), C a power of two ≥ 4× the cells,
+        each key at or after its home slot ``key & (C - 1)`` with no empty slot between (linear probing). Built
+        once per cache (the same table in every process: insertion is in key order)."""
+        tables = self.__dict__.setdefault("_open_tables", {})
+        if level not in tables:
+            keys, values = self.keys[level], self.values[level]
+            cap = 1 << max(4, int(math.ceil(math.log2(max(keys.size, 1) * 4))))
+            mask = np.uint64(cap - 1)
+            tab_k = np.zeros(cap, dtype=np.uint64)
+            tab_v = np.zeros((cap, 3), dtype=np.float32)
+            slot = (keys & mask).astype(np.int64)
+            pending = np.nonzero(keys != 0)[0]  # a key hashing to 0 (p = 2⁻⁶⁴) stays out: its points miss
+            while pending.size:
+                free = tab_k[slot[pending]] == 0
+                cand = pending[free]
+                _, first = np.unique(slot[cand], return_index=True)  # one key per free slot, the lowest
+                win = cand[first]
+                tab_k[slot[win]], tab_v[slot[win]] = keys[win], values[win]
+                pending = pending[~np.isin(pending, win)]
+                slot[pending] = (slot[pending] + 1) & (cap - 1)
+            tables[level] = (tab_k, tab_v)
+        return tables[level]
 
     def lookup(self, p: np.ndarray, n: np.ndarray, obj: np.ndarray, min_count: int = 1) -> tuple[np.ndarray,
                                                                                                    np.ndarray]:
@@ -232,10 +259,10 @@ class ConvergedRenderer:
     def trace_chain(self, ray, seed: int):
         """Follow each camera ray through its first hit and glossy/specular bounces.
 
-        Returns the emission gathered along the chain ([N, 3] numpy) and, per chain vertex, a dict of numpy
-        arrays: ``idx`` (the camera sample), ``weight`` (throughput × the diffuse component's sampled weight),
-        ``p``, ``n`` (oriented shading normal), ``obj`` (animated object id), ``ro``, ``rd`` (the ray that hit
-        it, for a fallback estimate).
+        Returns the emission gathered along the chain (a Dr.Jit ``Color3f``, one lane per camera sample) and, per
+        chain vertex, its lanes: a dict of evaluated Dr.Jit values ``si`` (the interaction), ``ray`` (the ray that
+        hit it), ``wd`` (throughput × the diffuse component's sampled weight) and ``hit``.
+        :meth:`vertex_arrays` turns one into numpy arrays of the lanes that need diffuse light.
         """
         mi, dr = self.mi, self.dr
         n = dr.width(ray.o)
@@ -247,7 +274,7 @@ class ConvergedRenderer:
         ctx_d.type_mask = mi.BSDFFlags.Diffuse
         ctx_g = mi.BSDFContext()
         ctx_g.type_mask = mi.BSDFFlags.Glossy | mi.BSDFFlags.Delta
-        vertices = []
+        lanes = []
         for depth in range(min(CHAIN_VERTICES, self.max_depth)):
             si = self.ms.scene.ray_intersect(ray, active)
             em = si.emitter(self.ms.scene, active)
@@ -264,35 +291,49 @@ class ConvergedRenderer:
                 throughput *= w_g
                 active = hit & (bs_g.pdf > 0) & (dr.max(throughput) > 0)
                 next_ray = si.spawn_ray(si.to_world(bs_g.wo))
-                # One kernel for this depth: Dr.Jit is lazy, and each array read back to numpy would otherwise
-                # trace the whole chain again; the next depth starts from these stored values.
+                # One kernel for this depth: Dr.Jit is lazy, and each later read would otherwise trace the whole
+                # chain again; the next depth starts from these stored values.
                 dr.eval(wd, si, ray, hit, emitted, throughput, active, next_ray)
             else:
                 dr.eval(wd, si, ray, hit, emitted)
-            vertices.append(self._vertex_arrays(si, ray, wd, hit))
+            lanes.append({"si": si, "ray": ray, "wd": wd, "hit": hit})
             if last:
                 break
             ray = next_ray
-        return _to_np3(emitted), vertices
+        return emitted, lanes
 
-    def _vertex_arrays(self, si, ray, wd, hit) -> dict:
+    def vertex_arrays(self, lane: dict, mask=None) -> dict:
+        """The lanes of a chain vertex that need diffuse light (hit, ``wd`` > 0, and ``mask`` where given) as
+        numpy arrays: ``idx`` (the camera sample), ``weight`` (``wd``), ``p``, ``n`` (oriented shading normal),
+        ``obj`` (animated object id), ``ro``, ``rd`` (the ray that hit it, for an estimate of its own)."""
         mi, dr = self.mi, self.dr
-        keep = _to_np3(wd).max(axis=1) > 0
-        keep &= np.array(hit, dtype=bool)
-        idx = np.nonzero(keep)[0]
+        si, ray, wd = lane["si"], lane["ray"], lane["wd"]
+        keep = lane["hit"] & (dr.max(wd) > 0)
+        if mask is not None:
+            keep &= mask
+        sel = dr.compress(keep)  # only the kept lanes are read back (a keyframe reads back few)
         n_sh = si.sh_frame.n
-        flip = mi.Frame3f.cos_theta(si.wi) < 0
-        n_or = dr.select(flip, -n_sh, n_sh)
-        dr.eval(n_or)
-        out = {"idx": idx, "weight": _to_np3(wd)[idx], "p": _to_np3(si.p)[idx], "n": _to_np3(n_or)[idx],
-               "ro": _to_np3(ray.o)[idx], "rd": _to_np3(ray.d)[idx]}
+        n_or = dr.select(mi.Frame3f.cos_theta(si.wi) < 0, -n_sh, n_sh)
+        take = lambda v: np.stack([np.array(dr.gather(mi.Float, v[i], sel), dtype=np.float64)  # noqa: E731
+                                      for i in range(3)], axis=1)
+        out = {"idx": np.array(sel, dtype=np.int64), "weight": take(wd), "p": take(si.p), "n": take(n_or),
+               "ro": take(ray.o), "rd": take(ray.d)}
         if self.shape_index is not None:
-            sidx = np.array(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64)[idx]
-            known = (sidx >= 0) & (sidx < self.shape_index.size)
-            out["obj"] = np.where(known, self.shape_index[np.clip(sidx, 0, self.shape_index.size - 1)], 0)
+            out["obj"] = np.array(dr.gather(mi.UInt32, self._lane_objects(si), sel), dtype=np.int64)
         else:
-            out["obj"] = np.zeros(idx.size, dtype=np.int64)
+            out["obj"] = np.zeros(out["idx"].size, dtype=np.int64)
         return out
+
+    def _lane_objects(self, si):
+        """Animated object id of each lane's hit (0: static or no hit), a Dr.Jit UInt32."""
+        mi, dr = self.mi, self.dr
+        if self.shape_index is None:
+            return mi.UInt32(0)
+        if not hasattr(self, "_shape_index_dr"):
+            self._shape_index_dr = mi.UInt32(self.shape_index.astype(np.uint32))
+        sidx = dr.reinterpret_array(mi.UInt32, si.shape)
+        known = sidx < self.shape_index.size
+        return dr.gather(mi.UInt32, self._shape_index_dr, dr.minimum(sidx, self.shape_index.size - 1), known)
 
     # ------------------------------------------------------------------------------------------ Q estimates
     def estimate_q(self, ro: np.ndarray, rd: np.ndarray, n_samples: int, seed: int) -> np.ndarray:
@@ -338,26 +379,42 @@ class ConvergedRenderer:
 
     # ------------------------------------------------------------------------------------------ keyframes
     def render(self, cache: IrradianceCache | None, seed: int, object_poses: dict | None = None) -> np.ndarray:
-        """The keyframe at the current pose: [H, W, 3] float32 radiance, blurred like a path-traced keyframe."""
+        """The keyframe at the current pose: [H, W, 3] float32 radiance, blurred like a path-traced keyframe.
+
+        The finest level's lookup runs in Dr.Jit on every lane of the chain (:meth:`_lookup_lanes`); only the
+        vertices it leaves without light are read back to numpy, for the coarser levels, the next-closest normal
+        bins and, where nothing covers them, an estimate of their own."""
+        dr = self.dr
         pos = self.camera_samples(seed)
         ray = self._camera_rays(pos)
-        emitted, vertices = self.trace_chain(ray, seed)
+        emitted, lanes = self.trace_chain(ray, seed)
         total = emitted
+        found = []
+        for lane in lanes:
+            if cache is None:
+                found.append(None)
+                continue
+            q, ok = self._lookup_lanes(cache, lane, object_poses)
+            total += dr.select(ok, lane["wd"] * q, 0.0)
+            found.append(ok)
+        dr.eval(total, [ok for ok in found if ok is not None])
+        vertices = [self.vertex_arrays(lane, None if ok is None else ~ok) for lane, ok in zip(lanes, found)]
+        total = _to_np3(total)
         qs, misses = [], []
         for v in vertices:
             p_rest = self.rest_points(v, object_poses)
             n_rest = self.rest_normals(v, object_poses)
-            q, found = (cache.lookup(p_rest, n_rest, v["obj"]) if cache is not None
-                        else (np.zeros((v["idx"].size, 3)), np.zeros(v["idx"].size, dtype=bool)))
-            miss = np.nonzero(~found)[0]
+            q, ok = (cache.lookup(p_rest, n_rest, v["obj"]) if cache is not None
+                     else (np.zeros((v["idx"].size, 3)), np.zeros(v["idx"].size, dtype=bool)))
+            miss = np.nonzero(~ok)[0]
             if miss.size and cache is not None:
                 # A vertex whose normal bin no probe saw near it (a blade's edge): the cells of the next-closest
                 # normal bins, before paying for an estimate of its own (a kernel launch per keyframe).
                 order = np.argsort(-(n_rest[miss] @ _BIN_NORMALS.T), axis=1)
                 for rank in range(1, N_NORMAL_BINS):
-                    q_alt, ok = cache.lookup(p_rest[miss], _BIN_NORMALS[order[:, rank]], v["obj"][miss])
-                    q[miss[ok]] = q_alt[ok]
-                    miss, order = miss[~ok], order[~ok]
+                    q_alt, hit = cache.lookup(p_rest[miss], _BIN_NORMALS[order[:, rank]], v["obj"][miss])
+                    q[miss[hit]] = q_alt[hit]
+                    miss, order = miss[~hit], order[~hit]
                     if not miss.size:
                         break
             qs.append(q)
@@ -373,6 +430,55 @@ class ConvergedRenderer:
         h, w = self.ms.height, self.ms.width
         rgb = total.reshape(h, w, self.spp, 3).mean(axis=2).astype(np.float32)
         return np.maximum(psf_blur(rgb), 0.0, dtype=np.float32)
+
+    def _lookup_lanes(self, cache: IrradianceCache, lane: dict, object_poses: dict | None):
+        """Q at every lane of a chain vertex from the cache's finest level, trilinear between the 8 cells around
+        each rest-frame point as :meth:`IrradianceCache.lookup` does there, in one Dr.Jit kernel: (Q ``Color3f``,
+        whether any of the 8 cells holds samples ``Bool``; False where the lane has no diffuse light to take)."""
+        mi, dr = self.mi, self.dr
+        si, wd = lane["si"], lane["wd"]
+        tables = cache.__dict__.setdefault("_dr_tables", {})
+        if 1 not in tables:
+            tab_k, tab_v = cache.open_table(1)
+            tables[1] = (mi.UInt64(tab_k), mi.Float(tab_v.ravel()), tab_k.size - 1)
+        tab_k, tab_v, mask = tables[1]
+        active = lane["hit"] & (dr.max(wd) > 0)
+        n_sh = si.sh_frame.n
+        n = dr.select(mi.Frame3f.cos_theta(si.wi) < 0, -n_sh, n_sh)
+        p = si.p
+        obj = self._lane_objects(si)
+        for k, name in enumerate(self.ms.object_names, start=1):  # points of animated objects in their rest frame
+            if not object_poses or name not in object_poses:
+                continue
+            m = np.asarray(object_poses[name], dtype=np.float64)
+            r, t = m[:3, :3].tolist(), m[:3, 3].tolist()  # Python floats: literals of the kernel
+            sel = obj == k
+            d = p - mi.Vector3f(*t)
+            p = dr.select(sel, mi.Point3f(*(d.x * r[0][j] + d.y * r[1][j] + d.z * r[2][j] for j in range(3))), p)
+            n = dr.select(sel, mi.Vector3f(*(n.x * r[0][j] + n.y * r[1][j] + n.z * r[2][j] for j in range(3))), n)
+        a = dr.abs(n)
+        on_x = (a.x >= a.y) & (a.x >= a.z)
+        on_y = ~on_x & (a.y >= a.z)
+        along = dr.select(on_x, n.x, dr.select(on_y, n.y, n.z))
+        nbin = mi.UInt64(dr.select(on_x, 0, dr.select(on_y, 2, 4)) + dr.select(along < 0, 1, 0))
+        c = p / cache.cell_m - 0.5
+        base = dr.floor(c)
+        frac = c - base
+        b = [mi.Int64(base.x), mi.Int64(base.y), mi.Int64(base.z)]
+        f = [frac.x, frac.y, frac.z]
+        acc = mi.Color3f(0.0)
+        wsum = mi.Float(0.0)
+        for corner in range(8):
+            off = [(corner >> k) & 1 for k in range(3)]
+            key = _hash_lanes(mi, [b[k] + off[k] for k in range(3)], nbin, mi.UInt64(obj), 1)
+            slot, hit = _probe(mi, dr, tab_k, mask, key, active)
+            w = mi.Float(1.0)
+            for k in range(3):
+                w *= f[k] if off[k] else 1.0 - f[k]
+            acc += dr.select(hit, w * dr.gather(mi.Color3f, tab_v, slot, hit), 0.0)
+            wsum += dr.select(hit, w, 0.0)
+        ok = active & (wsum > 1e-6)
+        return dr.select(ok, acc / dr.maximum(wsum, 1e-6), 0.0), ok
 
     def rest_points(self, v: dict, object_poses: dict | None) -> np.ndarray:
         return self._to_rest(v["p"], v["obj"], object_poses, point=True)
@@ -398,8 +504,8 @@ class ConvergedRenderer:
         (rest-frame points, normals, object ids, Q, sample counts)."""
         pos = self.camera_samples(seed)[::stride]
         ray = self._camera_rays(pos)
-        _, vertices = self.trace_chain(ray, seed)
-        vertices = [v for v in vertices if v["idx"].size]
+        _, lanes = self.trace_chain(ray, seed)
+        vertices = [v for v in map(self.vertex_arrays, lanes) if v["idx"].size]
         if not vertices:
             z = np.zeros((0, 3))
             return z, z, np.zeros(0, dtype=np.int64), z, np.zeros(0)
@@ -420,6 +526,48 @@ def scene_max_depth(scene) -> int:
     match = re.search(r"max_depth\s*=\s*(-?\d+)", str(scene.integrator()))
     depth = int(match.group(1)) if match else -1
     return depth if depth > 0 else UNLIMITED_DEPTH
+
+
+def _hash_lanes(mi, cells: list, nbin, obj, level: int):
+    """:func:`_hash` on Dr.Jit lanes: ``cells`` three Int64 arrays, ``nbin`` and ``obj`` UInt64 (the same keys)."""
+    p = [mi.UInt64(int(v)) for v in _PRIMES]
+    c = [_as_u64(mi, v) for v in cells]
+    h = c[0] * p[0]
+    h ^= h >> 29
+    h += c[1] * p[1]
+    h ^= h >> 31
+    h += c[2] * p[2]
+    h ^= h >> 27
+    h += nbin * p[3] + obj * p[4] + mi.UInt64(level) * p[5]
+    h ^= h >> 33
+    h *= p[4]
+    h ^= h >> 33
+    return h
+
+
+def _as_u64(mi, v):
+    import drjit as dr  # deferred: heavy
+
+    return dr.reinterpret_array(mi.UInt64, v)  # two's complement, as numpy's int64 → uint64 view
+
+
+def _probe(mi, dr, tab_k, mask: int, key, active):
+    """Linear probing of an open-addressing table (:meth:`IrradianceCache.open_table`) for ``key`` from its home
+    slot to the first match or empty slot: (slot, found)."""
+    slot = mi.UInt32(key & mi.UInt64(mask))
+
+    def cond(slot, found, done):
+        return ~done
+
+    def body(slot, found, done):
+        k = dr.gather(mi.UInt64, tab_k, slot, ~done)
+        found = found | (~done & (k == key))
+        done = done | found | (k == 0)
+        slot = dr.select(done, slot, (slot + 1) & mask)
+        return slot, found, done
+
+    slot, found, _ = dr.while_loop((slot, mi.Bool(False), ~active), cond, body)
+    return slot, found
 
 
 def _power(a, b):

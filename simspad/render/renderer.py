@@ -101,7 +101,7 @@ __all__ = ["LoadedScene", "RenderLayout", "RenderSettings", "RenderSummary", "Re
            "render_sequence", "select_variant", "with_warp_results"]
 
 #: Bumped when the pixels a given (scene, pose, settings) produce would change: part of every frame's cache key.
-RENDERER_VERSION = 7  # 7: multi-jittered samples where the (biased) low-discrepancy ones were; 6: Z from the camera centre
+RENDERER_VERSION = 7  # 7: multi-jittered samples (not the biased low-discrepancy ones); converged lookup in Dr.Jit
 #: Slack (s) allowed between the requested span and the trajectory's span.
 SPAN_TOLERANCE_S = 1e-9
 

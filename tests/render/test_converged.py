@@ -156,3 +156,69 @@ def test_the_cli_default_is_the_settings_default():
 
     option = next(p for p in cli.commands["render"].params if p.name == "cache_samples")
     assert option.default == DEFAULT_CACHE_SAMPLES == RenderSettings(duration_s=0.01).cache_samples
+
+
+def test_the_open_table_holds_every_cell_where_linear_probing_finds_it():
+    cache = _plane_samples(0.01)  # 10 000 cells at the finest level
+    keys, values = cache.keys[1], cache.values[1]
+    tab_k, tab_v = cache.open_table(1)
+    assert tab_k.size >= 4 * keys.size and tab_k.size & (tab_k.size - 1) == 0
+    assert np.count_nonzero(tab_k) == keys.size
+    mask = np.uint64(tab_k.size - 1)
+
+    def probe(key):
+        slot = int(key & mask)
+        while tab_k[slot] != 0:
+            if tab_k[slot] == key:
+                return slot
+            slot = (slot + 1) & int(mask)
+        return None
+
+    slots = [probe(k) for k in keys]
+    assert None not in slots
+    np.testing.assert_allclose(tab_v[slots], values, rtol=1e-6)
+    absent = np.setdiff1d(np.arange(1, 2000, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15), keys)
+    assert all(probe(k) is None for k in absent)
+    displaced = np.asarray(slots) != (keys & mask).astype(np.int64)
+    assert displaced.any()  # the table has collisions to resolve
+
+    # The kernel's probe (Dr.Jit lanes) finds the same slots, and finds no absent key.
+    from simspad.render import converged as cv
+    from simspad.render.mitsuba_env import select_variant
+
+    select_variant()
+    import drjit as dr  # deferred: after the variant is set
+    import mitsuba as mi
+
+    query = np.concatenate([keys, absent])
+    slot, found = cv._probe(mi, dr, mi.UInt64(tab_k), tab_k.size - 1, mi.UInt64(query), mi.Bool(True))
+    found = np.array(found, dtype=bool)
+    assert found[:keys.size].all() and not found[keys.size:].any()
+    assert np.array_equal(np.array(slot, dtype=np.int64)[:keys.size], slots)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", ["office", "fan"])
+def test_the_kernel_lookup_renders_what_the_numpy_lookup_renders(scene, monkeypatch):
+    """A keyframe's lookup runs in Dr.Jit at the finest level; the numpy lookup, given every vertex instead, gives
+    the same pixels to float32 rounding (the fan: its blades' points in their rest frame)."""
+    from simspad.render import converged as cv
+    from simspad.render.flow import object_poses
+    from simspad.render.renderer import layout_render, load_scene
+
+    loaded = load_scene(scene, None, 32, 24, 16)
+    layout = layout_render(scene, None, RenderSettings(duration_s=0.004, resolution=(32, 24), spp=16),
+                           loaded=loaded)
+    poses = [(np.asarray(layout.camera_to_world[i]), object_poses(loaded.ts, layout.times_s[i]))
+             for i in (0, layout.n_keyframes - 1)]
+    cr = cv.ConvergedRenderer(loaded.ms, 16)
+    cache = cv.build_cache(cr, poses, 0, 8, 2.0)
+    camera_to_world, objects = poses[1]
+    loaded.ms.set_pose(camera_to_world, objects)
+    kernel = cr.render(cache, 3, objects)
+    lookup = cv.ConvergedRenderer._lookup_lanes
+    monkeypatch.setattr(cv.ConvergedRenderer, "_lookup_lanes",
+                        lambda self, *a: (lambda q, ok: (q, ok & False))(*lookup(self, *a)))
+    numpy_only = cr.render(cache, 3, objects)
+    assert kernel.max() > 0 and np.isfinite(kernel).all()
+    np.testing.assert_allclose(kernel, numpy_only, rtol=2e-5, atol=1e-7 * float(numpy_only.max()))

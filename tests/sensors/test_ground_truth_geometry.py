@@ -221,9 +221,11 @@ def test_warping_by_the_flow_predicts_the_next_frame(tmp_path_factory, scene):
         r = _warp_residuals(d, other, i)
         assert r["n"] > 100, r
         # Within the render's noise. On the office (a camera pan over a static scene) the residual is 0.75–0.93
-        # of the two-seed difference; the fan's pitched blades turn under the cage's shadows and the lights, so
-        # their brightness changes along the motion (the motion field is not brightness-constancy flow): 1.0–1.5.
-        assert r["flat_with"] <= (1.0 if scene == "office" else 1.6) * r["flat_noise"], r
+        # of the two-seed difference (0.53–0.94 with multi-jittered samples); the fan's pitched blades turn under
+        # the cage's shadows and the lights, so their brightness changes along the motion (the motion field is not
+        # brightness-constancy flow), a residual the render's noise does not set: 1.4–1.9 of the two-seed
+        # difference with multi-jittered samples, 1.0–1.5 with the low-discrepancy ones (noisier here).
+        assert r["flat_with"] <= (1.0 if scene == "office" else 2.0) * r["flat_noise"], r
         assert r["with"] < 0.9 * r["off"], r  # the flow is the motion: half a pixel off is clearly worse
         if scene == "office":  # and it explains the images' change (the fan's blades move < 1 px per interval
             # while the frozen noise stays put, so there warping buys little over not warping at all)
