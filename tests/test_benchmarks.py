@@ -108,3 +108,12 @@ def test_bench_convergence_star_mtf_is_one_against_itself_and_falls_with_blur(mo
     assert 0.1 < blur["vs_reference"]["mtf50_cyc_px"] < 0.25
     for f in ("mtf_at_0p25_cyc_px", "mtf_at_0p40_cyc_px"):
         assert blur["vs_print"][f] < 0.5 * same["vs_print"][f]
+
+
+@pytest.mark.slow
+def test_bench_cache_lookup_times_the_kernel_against_the_numpy_lookup_and_they_agree(child_env):
+    res = subprocess.run([sys.executable, str(BENCHMARKS / "bench_cache_lookup.py"), "--resolution", "24x18",
+                          "--spp", "4", "--cache-samples", "4", "--rounds", "1", "--scenes", "office"],
+                         capture_output=True, text=True, timeout=300, env=child_env)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert re.search(r"^office +\d+\.\d+ +\d+\.\d+ +\d+\.\d+x +\d+\.\d+ +\d\.\de-\d\d$", res.stdout, re.M), res.stdout

@@ -124,8 +124,20 @@ def _render_noise_text(a) -> str:
     fraction = float(a.get("render_noise_spurious_event_fraction", float("nan")))
     if not math.isfinite(relative):
         return "render noise not measured (the render has no noise probe)"
-    return (f"render {relative:.1%} per pixel (median error of one keyframe's luminance); drawing that noise anew fires "
-            f"{fraction:.1%} of pixels (a noise-free event sensor at this lux)")
+    split = ""
+    try:
+        doc = json.loads(a.get("render_noise", "null"))
+    except (TypeError, ValueError):
+        doc = None
+    if isinstance(doc, dict) and "cache_relative_noise_median" in doc:  # a converged render: two kinds of noise
+        try:
+            split = (f": {float(doc['keyframe_relative_noise_median']):.1%} changing between keyframes, "
+                     f"{float(doc['cache_relative_noise_median']):.1%} the cache's, fixed to the surfaces")
+        except (KeyError, TypeError, ValueError):
+            split = ""
+    what = "the keyframes' " if split else "that "
+    return (f"render {relative:.1%} per pixel (median error of one keyframe's luminance{split}); drawing {what}noise "
+            f"anew fires {fraction:.1%} of pixels (a noise-free event sensor at this lux)")
 
 
 def _motion_text(a) -> str:

@@ -93,17 +93,21 @@ class IrradianceCache:
     keys : dict level -> sorted uint64 array
     values : dict level -> [K, 3] float64, the mean Q of each cell
     counts : dict level -> [K] int64, the samples behind each cell
+    half_values : dict level -> ([K, 3], [K, 3]), the cells' means over the first and the second half of each
+        point's estimates (:meth:`half`); empty for a cache built without them
     """
 
     def __init__(self, cell_m: float):
         self.cell_m = float(cell_m)
-        self.keys, self.values, self.counts = {}, {}, {}
+        self.keys, self.values, self.counts, self.half_values = {}, {}, {}, {}
 
     @classmethod
     def from_samples(cls, cell_m: float, p: np.ndarray, n: np.ndarray, obj: np.ndarray, q: np.ndarray,
-                     weight: np.ndarray) -> "IrradianceCache":
+                     weight: np.ndarray, halves: tuple | None = None) -> "IrradianceCache":
         """Cells from Q estimates ``q`` [N, 3] at rest-frame points ``p`` with oriented normals ``n`` and object
-        ids ``obj``; ``weight`` [N] is the number of samples behind each estimate."""
+        ids ``obj``; ``weight`` [N] is the number of samples behind each estimate. ``halves`` (optional): the
+        estimates from the first and the second half of each point's samples ([N, 3] each), kept as the cells of
+        two half caches (:meth:`half`)."""
         cache = cls(cell_m)
         nb = normal_bin(n)
         for level in LEVELS:
@@ -111,12 +115,28 @@ class IrradianceCache:
             keys = _hash(np.floor(p / h).astype(np.int64), nb, obj, level)
             uniq, inv = np.unique(keys, return_inverse=True)
             w = np.bincount(inv, weights=weight, minlength=uniq.size)
-            sums = np.stack([np.bincount(inv, weights=q[:, c] * weight, minlength=uniq.size) for c in range(3)],
-                            axis=1)
+
+            def cell_means(values):
+                return np.stack([np.bincount(inv, weights=values[:, c] * weight, minlength=uniq.size)
+                                 for c in range(3)], axis=1) / w[:, None]
+
             cache.keys[level] = uniq
-            cache.values[level] = sums / w[:, None]
+            cache.values[level] = cell_means(q)
             cache.counts[level] = w.astype(np.int64)
+            if halves is not None:
+                cache.half_values[level] = (cell_means(halves[0]), cell_means(halves[1]))
         return cache
+
+    def half(self, which: int) -> "IrradianceCache | None":
+        """The cache of the first (``which`` = 0) or second (1) half of every point's estimates: two independent
+        caches, each with twice this one's noise variance, so that half their difference has this cache's noise
+        (the render-noise budget measures it so). None for a cache built without its halves."""
+        if not self.half_values:
+            return None
+        out = IrradianceCache(self.cell_m)
+        out.keys, out.counts = self.keys, self.counts
+        out.values = {level: pair[which] for level, pair in self.half_values.items()}
+        return out
 
     def open_table(self, level: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """The cells of ``level`` as an open-addressing hash table for a lookup inside a Dr.Jit kernel (which has
@@ -336,15 +356,16 @@ class ConvergedRenderer:
         return dr.gather(mi.UInt32, self._shape_index_dr, dr.minimum(sidx, self.shape_index.size - 1), known)
 
     # ------------------------------------------------------------------------------------------ Q estimates
-    def estimate_q(self, ro: np.ndarray, rd: np.ndarray, n_samples: int, seed: int) -> np.ndarray:
+    def estimate_q(self, ro: np.ndarray, rd: np.ndarray, n_samples: int, seed: int, halves: bool = False):
         """Q = E / π at the points the rays (``ro``, ``rd`` [N, 3]) hit: the mean of ``n_samples`` estimates,
         each next-event estimation plus a cosine-sampled direction continued by the path tracer, combined by
-        the power heuristic ([N, 3])."""
+        the power heuristic ([N, 3]). ``halves``: also the means of the first and of the second half of the
+        estimates (two independent caches of half the samples, whose difference is the cache's own noise)."""
         mi, dr = self.mi, self.dr
         scene = self.ms.scene
         m = ro.shape[0]
         if m == 0:
-            return np.zeros((0, 3))
+            return (np.zeros((0, 3)),) * 3 if halves else np.zeros((0, 3))
         rep = lambda a: np.repeat(a, n_samples, axis=0).astype(np.float32)  # noqa: E731
         ray = mi.Ray3f(mi.Point3f(*rep(ro).T), mi.Vector3f(*rep(rd).T))
         sampler = self._sampler(seed, m * n_samples)
@@ -374,8 +395,12 @@ class ConvergedRenderer:
         mis_b = _power(pdf_b, pdf_l2)
         q += dr.select(active, li - le2 * (1.0 - mis_b), 0.0)
         dr.eval(q)  # one kernel (each channel read back would otherwise trace the paths again)
-        out = _to_np3(q).reshape(m, n_samples, 3).mean(axis=1)
-        return np.maximum(out, 0.0)
+        samples = _to_np3(q).reshape(m, n_samples, 3)
+        out = np.maximum(samples.mean(axis=1), 0.0)
+        if not halves:
+            return out
+        k = max(n_samples // 2, 1)
+        return out, np.maximum(samples[:, :k].mean(axis=1), 0.0), np.maximum(samples[:, k:].mean(axis=1), 0.0)
 
     # ------------------------------------------------------------------------------------------ keyframes
     def render(self, cache: IrradianceCache | None, seed: int, object_poses: dict | None = None) -> np.ndarray:
@@ -501,23 +526,25 @@ class ConvergedRenderer:
 
     def cache_samples(self, seed: int, q_samples: int, object_poses: dict | None = None, stride: int = 1):
         """Q estimates at the chain vertices of the current view (every ``stride``-th camera sample):
-        (rest-frame points, normals, object ids, Q, sample counts)."""
+        (rest-frame points, normals, object ids, Q, sample counts, Q of the first and of the second half of the
+        samples)."""
         pos = self.camera_samples(seed)[::stride]
         ray = self._camera_rays(pos)
         _, lanes = self.trace_chain(ray, seed)
         vertices = [v for v in map(self.vertex_arrays, lanes) if v["idx"].size]
         if not vertices:
             z = np.zeros((0, 3))
-            return z, z, np.zeros(0, dtype=np.int64), z, np.zeros(0)
+            return z, z, np.zeros(0, dtype=np.int64), z, np.zeros(0), z, z
         # One estimate over every vertex of the view (in batches of a fixed size: one kernel, bounded memory).
         ro = np.concatenate([v["ro"] for v in vertices])
         rd = np.concatenate([v["rd"] for v in vertices])
         per_batch = max(1, Q_BATCH_LANES // q_samples)
-        q = np.concatenate([self.estimate_q(ro[a:a + per_batch], rd[a:a + per_batch], q_samples, _mix(seed, 2000 + a))
-                            for a in range(0, ro.shape[0], per_batch)])
+        parts = [self.estimate_q(ro[a:a + per_batch], rd[a:a + per_batch], q_samples, _mix(seed, 2000 + a),
+                                 halves=True) for a in range(0, ro.shape[0], per_batch)]
+        q, q_a, q_b = (np.concatenate([part[i] for part in parts]) for i in range(3))
         return (np.concatenate([self.rest_points(v, object_poses) for v in vertices]),
                 np.concatenate([self.rest_normals(v, object_poses) for v in vertices]),
-                np.concatenate([v["obj"] for v in vertices]), q, np.full(q.shape[0], float(q_samples)))
+                np.concatenate([v["obj"] for v in vertices]), q, np.full(q.shape[0], float(q_samples)), q_a, q_b)
 
 
 def scene_max_depth(scene) -> int:
@@ -615,8 +642,8 @@ def build_cache(cr: ConvergedRenderer, poses: list, seed: int, q_samples: int, c
             parts.append(cr.cache_samples(_mix(seed, 77 + k), q_samples, objects))
     finally:
         cr.spp = spp
-    p, n, obj, q, w = (np.concatenate([part[i] for part in parts]) for i in range(5))
-    return IrradianceCache.from_samples(cell_m, p, n, obj.astype(np.int64), q, w)
+    p, n, obj, q, w, q_a, q_b = (np.concatenate([part[i] for part in parts]) for i in range(7))
+    return IrradianceCache.from_samples(cell_m, p, n, obj.astype(np.int64), q, w, halves=(q_a, q_b))
 
 
 def save_cache(cache: IrradianceCache, path) -> None:
@@ -628,6 +655,8 @@ def save_cache(cache: IrradianceCache, path) -> None:
         arrays[f"keys{level}"] = cache.keys[level]
         arrays[f"values{level}"] = cache.values[level]
         arrays[f"counts{level}"] = cache.counts[level]
+        if level in cache.half_values:
+            arrays[f"half_a{level}"], arrays[f"half_b{level}"] = cache.half_values[level]
     with open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
     os.replace(tmp, path)
@@ -642,6 +671,8 @@ def load_cache(path) -> IrradianceCache | None:
                 cache.keys[level] = d[f"keys{level}"]
                 cache.values[level] = d[f"values{level}"]
                 cache.counts[level] = d[f"counts{level}"]
+                if f"half_a{level}" in d:
+                    cache.half_values[level] = (d[f"half_a{level}"], d[f"half_b{level}"])
     except (OSError, KeyError, ValueError):
         return None
     return cache

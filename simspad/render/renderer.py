@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import os
 import shutil
 import sys
@@ -42,7 +43,7 @@ from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.io.trajectory_files import load_trajectory
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
-from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, render_noise_budget
+from simspad.radiance.noise_budget import PROBE_SEED_OFFSET, relative_noise, render_noise_budget
 from simspad.render.converged import (
     CACHE_FILE_PREFIX,
     CHAIN_VERTICES,
@@ -88,6 +89,7 @@ from simspad.render.settings import RenderSettings
 from simspad.render.render_summary import RenderSummary
 from simspad.render.warp.rendering import (
     SegmentReport,
+    cache_probe_names,
     chunk_result,
     merge_chunk_results,
     noise_probe_name,
@@ -433,7 +435,8 @@ def finalize_render(layout: RenderLayout, out_dir) -> Path:
                            f"{missing[0]})", path=out_dir)
     path = write_timeline_json(out_dir, width=layout.width, height=layout.height, keyframes=layout.keyframes(),
                                **layout.timeline, render_noise=measure_render_noise(layout, out_dir))
-    remove_stale_frames(out_dir, set(layout.names) | {noise_probe_name(layout)})
+    probes = {noise_probe_name(layout), *(cache_probe_names(layout) if layout_convergence(layout) else ())}
+    remove_stale_frames(out_dir, set(layout.names) | probes)
     remove_stale_geometry(out_dir, set(geometry))
     keep = layout.timeline.get("renderer", {}).get("convergence", {}).get("cache_file")
     for stale in out_dir.glob(f"{CACHE_FILE_PREFIX}*.npz"):  # caches of earlier converged renders into out_dir
@@ -453,10 +456,23 @@ def measure_render_noise(layout: RenderLayout, out_dir) -> dict | None:
     probe = noise_probe_name(layout)
     if not (out_dir / probe).is_file():
         return None
-    y0 = luminance_from_rgb(read_exr(out_dir / layout.names[0])["rgb"])
-    y1 = luminance_from_rgb(read_exr(out_dir / probe)["rgb"])
-    return {**render_noise_budget(y0, y1), "probe_file": probe, "probe_keyframe": 0,
-            "probe_seed": layout.seed + PROBE_SEED_OFFSET, "probe_renders": 1}
+    lum = lambda name: luminance_from_rgb(read_exr(out_dir / name)["rgb"])  # noqa: E731
+    budget = {**render_noise_budget(lum(layout.names[0]), lum(probe)), "probe_file": probe, "probe_keyframe": 0,
+              "probe_seed": layout.seed + PROBE_SEED_OFFSET, "probe_renders": 1}
+    halves = cache_probe_names(layout) if layout_convergence(layout) is not None else ()
+    if halves and all((out_dir / name).is_file() for name in halves):
+        # A converged render: the probe measured the noise that changes between keyframes; the cache's own noise
+        # stays on the surfaces. Half the difference of the two half caches' renders has the whole cache's noise
+        # (each half has twice its variance); the two are independent, so the total adds in quadrature.
+        cache_median, cache_rms = (v / math.sqrt(2.0) for v in relative_noise(lum(halves[0]), lum(halves[1])))
+        budget.update({
+            "keyframe_relative_noise_median": budget["relative_noise_median"],
+            "keyframe_relative_noise_rms": budget["relative_noise_rms"],
+            "cache_relative_noise_median": cache_median, "cache_relative_noise_rms": cache_rms,
+            "relative_noise_median": math.hypot(budget["relative_noise_median"], cache_median),
+            "relative_noise_rms": math.hypot(budget["relative_noise_rms"], cache_rms),
+            "cache_probe_files": list(halves)})
+    return budget
 
 
 def _check_same_inputs(layout: RenderLayout, loaded: LoadedScene) -> None:

@@ -33,7 +33,7 @@ from simspad.io.exr import read_exr, write_exr
 from simspad.motion.trajectory import TrajectorySet
 from simspad.physics.radiometry import luminance_from_rgb
 from simspad.radiance.noise_budget import PROBE_SEED_OFFSET
-from simspad.render.converged import layout_radiance
+from simspad.render.converged import converged_renderer, layout_convergence, layout_radiance
 from simspad.render.blocks import block_window, blocks_of_tiles, render_fraction, tiles_of_blocks
 from simspad.render.flow import object_poses
 from simspad.render.keyframe_files import frame_key, frame_names, write_frame
@@ -126,17 +126,43 @@ def noise_probe_name(layout: RenderLayout) -> str:
     return f"frames/noise-probe-{frame_key(dict(layout.base_key, noise_probe=1), layout.times_s[0])}.exr"
 
 
+def cache_probe_names(layout: RenderLayout) -> tuple[str, str]:
+    """Relative files of a converged render's cache probes: keyframe 0 (the render's seed) from each half of its
+    irradiance cache (:meth:`~simspad.render.converged.IrradianceCache.half`)."""
+    return tuple(f"frames/noise-probe-{frame_key(dict(layout.base_key, noise_probe=1, cache_half=k), layout.times_s[0])}"
+                 f".exr" for k in (0, 1))
+
+
 def render_noise_probe(ms: MitsubaScene, ts: TrajectorySet, layout: RenderLayout, out_dir: Path) -> bool:
     """Render the noise probe (keyframe 0's radiance with the layout's seed + 1) into ``out_dir`` unless it is
     there; True if it was rendered now. The warp schedule judges its warps against it, and every render's
-    ``timeline.json`` states its render-noise budget from it (:func:`simspad.render.renderer.measure_render_noise`)."""
+    ``timeline.json`` states its render-noise budget from it (:func:`simspad.render.renderer.measure_render_noise`).
+
+    A converged render's probe is its own keyframe 0 from the same cache with the next seed: the noise that
+    changes from keyframe to keyframe (camera rays, glossy chains). The cache's noise stays on the surfaces, and
+    is measured apart: keyframe 0 with the render's seed from each half of the cache (:func:`cache_probe_names`)."""
     path = out_dir / noise_probe_name(layout)
     if path.is_file():
         return False
-    ms.set_pose(np.asarray(layout.camera_to_world[0]), _probe_objects(ts, layout))
-    rgb = ms.render_radiance(layout.seed + PROBE_SEED_OFFSET)
-    write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
+    converged = layout_convergence(layout) is not None
+    if converged:  # the cache is read or built first: building it poses the probe views
+        cr, cache = converged_renderer(layout, ms, ts, out_dir)
+    objects = _probe_objects(ts, layout)
+    ms.set_pose(np.asarray(layout.camera_to_world[0]), objects)
+    if not converged:
+        rgb = ms.render_radiance(layout.seed + PROBE_SEED_OFFSET)
+    else:
+        halves = [cache.half(k) for k in (0, 1)]
+        if None not in halves:
+            for name, half in zip(cache_probe_names(layout), halves):
+                _write_rgb(out_dir / name, cr.render(half, layout.seed, objects))
+        rgb = cr.render(cache, layout.seed + PROBE_SEED_OFFSET, objects)
+    _write_rgb(path, rgb)  # last: its presence means the probe is complete
     return True
+
+
+def _write_rgb(path: Path, rgb: np.ndarray) -> None:
+    write_exr(path, {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2]})
 
 
 def noise_map(rgb_seed: np.ndarray, rgb_next_seed: np.ndarray) -> tuple[np.ndarray, float]:
@@ -266,13 +292,10 @@ def render_with_warps(ms: MitsubaScene, ts: TrajectorySet, layout: RenderLayout,
             key0 = keyframes.ready[0].rgb
         else:
             key0 = read_exr(out_dir / keyframes.render_names[0])["rgb"]
+        # (a converged render's probe is keyframe 0 from the same cache with the next seed: its warps are judged
+        # against its own keyframe-to-keyframe noise)
         render_noise_probe(ms, ts, layout, out_dir)
-        if radiance is None:
-            probe = read_exr(out_dir / noise_probe_name(layout))["rgb"]
-        else:  # a converged render's warps are judged against its own noise: keyframe 0 from the same cache with
-            # the next seed (kept in memory, the same in every chunk; the probe file stays path-traced: the budget's)
-            ms.set_pose(*keyframes.poses_at(0))
-            probe = radiance(layout.seed + PROBE_SEED_OFFSET, keyframes.poses_at(0)[1])
+        probe = read_exr(out_dir / noise_probe_name(layout))["rgb"]
         if keyframes.with_emission:
             ms.set_pose(*keyframes.poses_at(0))
             key0_emission = keyframes.ready[0].emission if first == 0 else keyframes.source_emission(0)
