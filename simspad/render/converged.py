@@ -465,7 +465,7 @@ class ConvergedRenderer:
         tables = cache.__dict__.setdefault("_dr_tables", {})
         if 1 not in tables:
             tab_k, tab_v = cache.open_table(1)
-            tables[1] = (mi.UInt64(tab_k), mi.Float(tab_v.ravel()), tab_k.size - 1)
+            tables[1] = (mi.UInt64(tab_k), mi.Float(tab_v.ravel()), dr.opaque(mi.UInt32, tab_k.size - 1))
         tab_k, tab_v, mask = tables[1]
         active = lane["hit"] & (dr.max(wd) > 0)
         n_sh = si.sh_frame.n
@@ -476,7 +476,9 @@ class ConvergedRenderer:
             if not object_poses or name not in object_poses:
                 continue
             m = np.asarray(object_poses[name], dtype=np.float64)
-            r, t = m[:3, :3].tolist(), m[:3, 3].tolist()  # Python floats: literals of the kernel
+            # Opaque: a literal pose would be baked into the kernel and compile it again for every keyframe.
+            r = [[dr.opaque(mi.Float, float(v)) for v in row] for row in m[:3, :3]]
+            t = [dr.opaque(mi.Float, float(v)) for v in m[:3, 3]]
             sel = obj == k
             d = p - mi.Vector3f(*t)
             p = dr.select(sel, mi.Point3f(*(d.x * r[0][j] + d.y * r[1][j] + d.z * r[2][j] for j in range(3))), p)
@@ -486,7 +488,7 @@ class ConvergedRenderer:
         on_y = ~on_x & (a.y >= a.z)
         along = dr.select(on_x, n.x, dr.select(on_y, n.y, n.z))
         nbin = mi.UInt64(dr.select(on_x, 0, dr.select(on_y, 2, 4)) + dr.select(along < 0, 1, 0))
-        c = p / cache.cell_m - 0.5
+        c = p / dr.opaque(mi.Float, cache.cell_m) - 0.5  # opaque: one kernel for every cache (as the mask below)
         base = dr.floor(c)
         frac = c - base
         b = [mi.Int64(base.x), mi.Int64(base.y), mi.Int64(base.z)]
@@ -578,10 +580,10 @@ def _as_u64(mi, v):
     return dr.reinterpret_array(mi.UInt64, v)  # two's complement, as numpy's int64 → uint64 view
 
 
-def _probe(mi, dr, tab_k, mask: int, key, active):
+def _probe(mi, dr, tab_k, mask, key, active):
     """Linear probing of an open-addressing table (:meth:`IrradianceCache.open_table`) for ``key`` from its home
     slot to the first match or empty slot: (slot, found)."""
-    slot = mi.UInt32(key & mi.UInt64(mask))
+    slot = mi.UInt32(key & mi.UInt64(mask))  # ``mask``: an int or an opaque UInt32
 
     def cond(slot, found, done):
         return ~done

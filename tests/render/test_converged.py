@@ -223,3 +223,13 @@ def test_the_kernel_lookup_renders_what_the_numpy_lookup_renders(scene, monkeypa
     numpy_only = cr.render(cache, 3, objects)
     assert kernel.max() > 0 and np.isfinite(kernel).all()
     np.testing.assert_allclose(kernel, numpy_only, rtol=2e-5, atol=1e-7 * float(numpy_only.max()))
+
+
+@pytest.mark.slow
+def test_a_converged_render_of_moving_objects_compiles_its_kernels_once(tmp_path):
+    # The blades' poses, the cache's cell size and its table's size enter the lookup kernel as opaque values: as
+    # literals they were baked into it, and every keyframe of the fan compiled it again (6 of 6).
+    summary = render_sequence("fan", None, RenderSettings(duration_s=0.004, resolution=(32, 24), spp=16,
+                                                          convergence="cache", cache_samples=16),
+                              out_dir=tmp_path / "fan", progress=False)
+    assert summary.n_rendered >= 4 and summary.compiled_after_first == 0, summary
