@@ -59,21 +59,28 @@ _PRIMES = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 
                     0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53], dtype=np.uint64)
 
 
+def _mix_key(c0, c1, c2, nbin, obj, level, primes, shift):
+    """The key of a cell: unsigned 64-bit arithmetic that wraps, on numpy arrays or Dr.Jit lanes alike (``primes``
+    :data:`_PRIMES` and ``shift`` the shift amounts' type, each in the caller's arithmetic)."""
+    h = c0 * primes[0]
+    h ^= h >> shift(29)
+    h += c1 * primes[1]
+    h ^= h >> shift(31)
+    h += c2 * primes[2]
+    h ^= h >> shift(27)
+    h += nbin * primes[3] + obj * primes[4] + level * primes[5]
+    h ^= h >> shift(33)
+    h *= primes[4]
+    h ^= h >> shift(33)
+    return h
+
+
 def _hash(cells: np.ndarray, nbin: np.ndarray, obj: np.ndarray, level: int) -> np.ndarray:
     """64-bit keys of integer cells [N, 3], normal bins [N] and object ids [N] at ``level``."""
     with np.errstate(over="ignore"):
         c = cells.astype(np.int64).view(np.uint64)
-        h = c[:, 0] * _PRIMES[0]
-        h ^= (h >> np.uint64(29))
-        h += c[:, 1] * _PRIMES[1]
-        h ^= (h >> np.uint64(31))
-        h += c[:, 2] * _PRIMES[2]
-        h ^= (h >> np.uint64(27))
-        h += nbin.astype(np.uint64) * _PRIMES[3] + obj.astype(np.uint64) * _PRIMES[4] + np.uint64(level) * _PRIMES[5]
-        h ^= (h >> np.uint64(33))
-        h *= _PRIMES[4]
-        h ^= (h >> np.uint64(33))
-    return h
+        return _mix_key(c[:, 0], c[:, 1], c[:, 2], nbin.astype(np.uint64), obj.astype(np.uint64), np.uint64(level),
+                        _PRIMES, np.uint64)
 
 
 def normal_bin(n: np.ndarray) -> np.ndarray:
@@ -332,8 +339,7 @@ class ConvergedRenderer:
         if mask is not None:
             keep &= mask
         sel = dr.compress(keep)  # only the kept lanes are read back (a keyframe reads back few)
-        n_sh = si.sh_frame.n
-        n_or = dr.select(mi.Frame3f.cos_theta(si.wi) < 0, -n_sh, n_sh)
+        n_or = self._oriented_normal(si)
         take = lambda v: np.stack([np.array(dr.gather(mi.Float, v[i], sel), dtype=np.float64)  # noqa: E731
                                       for i in range(3)], axis=1)
         out = {"idx": np.array(sel, dtype=np.int64), "weight": take(wd), "p": take(si.p), "n": take(n_or),
@@ -343,6 +349,11 @@ class ConvergedRenderer:
         else:
             out["obj"] = np.zeros(out["idx"].size, dtype=np.int64)
         return out
+
+    def _oriented_normal(self, si):
+        """The shading normal turned to the side the ray came from (what the cache's normal bins are keyed by)."""
+        n_sh = si.sh_frame.n
+        return self.dr.select(self.mi.Frame3f.cos_theta(si.wi) < 0, -n_sh, n_sh)
 
     def _lane_objects(self, si):
         """Animated object id of each lane's hit (0: static or no hit), a Dr.Jit UInt32."""
@@ -371,8 +382,7 @@ class ConvergedRenderer:
         sampler = self._sampler(seed, m * n_samples)
         si = scene.ray_intersect(ray)
         active = si.is_valid()
-        n_sh = si.sh_frame.n
-        n_or = dr.select(mi.Frame3f.cos_theta(si.wi) < 0, -n_sh, n_sh)
+        n_or = self._oriented_normal(si)
         frame = mi.Frame3f(n_or)
         q = mi.Color3f(0.0)
         # Next-event estimation.
@@ -468,8 +478,7 @@ class ConvergedRenderer:
             tables[1] = (mi.UInt64(tab_k), mi.Float(tab_v.ravel()), dr.opaque(mi.UInt32, tab_k.size - 1))
         tab_k, tab_v, mask = tables[1]
         active = lane["hit"] & (dr.max(wd) > 0)
-        n_sh = si.sh_frame.n
-        n = dr.select(mi.Frame3f.cos_theta(si.wi) < 0, -n_sh, n_sh)
+        n = self._oriented_normal(si)
         p = si.p
         obj = self._lane_objects(si)
         for k, name in enumerate(self.ms.object_names, start=1):  # points of animated objects in their rest frame
@@ -559,19 +568,8 @@ def scene_max_depth(scene) -> int:
 
 def _hash_lanes(mi, cells: list, nbin, obj, level: int):
     """:func:`_hash` on Dr.Jit lanes: ``cells`` three Int64 arrays, ``nbin`` and ``obj`` UInt64 (the same keys)."""
-    p = [mi.UInt64(int(v)) for v in _PRIMES]
     c = [_as_u64(mi, v) for v in cells]
-    h = c[0] * p[0]
-    h ^= h >> 29
-    h += c[1] * p[1]
-    h ^= h >> 31
-    h += c[2] * p[2]
-    h ^= h >> 27
-    h += nbin * p[3] + obj * p[4] + mi.UInt64(level) * p[5]
-    h ^= h >> 33
-    h *= p[4]
-    h ^= h >> 33
-    return h
+    return _mix_key(*c, nbin, obj, mi.UInt64(level), [mi.UInt64(int(v)) for v in _PRIMES], int)
 
 
 def _as_u64(mi, v):
