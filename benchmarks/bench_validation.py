@@ -1,4 +1,4 @@
-"""What validating a recording on open costs, next to evaluating every method on it (issue 33).
+"""What validating a recording on open costs, next to evaluating every method on it.
 
     python benchmarks/bench_validation.py RECORDING.h5 [--rounds 5] [--no-evaluate]
 
