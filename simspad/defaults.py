@@ -12,8 +12,11 @@ import numbers
 
 #: Render resolution (width, height) in pixels.
 RESOLUTION_PX = (128, 96)
-#: Monte Carlo samples per pixel of a render.
+#: Monte Carlo samples per pixel of a path-traced render (``convergence = "off"``).
 SPP = 16
+#: Camera rays per pixel of a converged render (``simspad render`` with no quality flag): fewer (16) leave the
+#: office and plant at 3.5-4.0 % median error at 48×36 px where 64 give 2.9-3.0 % (docs/rendering.md).
+CAMERA_RAYS = 64
 #: Largest predicted image motion between two rendered keyframes, in pixels.
 MAX_FLOW_PX = 0.5
 #: Lowest keyframe rate in Hz, whatever the motion.

@@ -115,7 +115,8 @@ def _convergence_text(text) -> str:
     if not isinstance(c, dict):
         return f"converged, unreadable settings {str(text)[:60]!r}"
     return (f"convergence {c.get('mode', '?')}: {c.get('cache_samples', '?')} irradiance estimates per cache point, "
-            f"{c.get('cache_probes', '?')} probe views, cells of {c.get('cache_cell_px', '?')} px")
+            f"{c.get('cache_probes', '?')} probe views, cells of {c.get('cache_cell_px', '?')} px"
+            + (f" of a {c['cache_width_px']}-px probe grid" if "cache_width_px" in c else ""))
 
 
 def _render_noise_text(a) -> str:

@@ -9,12 +9,12 @@ spec's sizes.
   on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
   traversal, depth pass, EXR write; variable part: path tracing).
 - **Converged renders** (``convergence = "cache"``, :mod:`simspad.render.converged`) pay two costs, calibrated
-  apart on the sequence's own settings: the irradiance cache's build, once per render, timed on its own and
-  scaled by ``cache_probes × W·H × cache_samples`` relative to the calibration's (:meth:`SceneRenderCost.
+  apart: the irradiance cache's build, once per render, timed on its own and scaled by ``cache_probes`` × the
+  probe rays per view × ``cache_samples`` relative to the calibration's (:meth:`SceneRenderCost.
   cache_build_seconds`); and each keyframe's (camera rays, glossy chain, cache lookups), timed after the build
-  with the cache already on disk, fitted as above. Their noise probe is path-traced (keyframe 0 at ``spp``), at the
-  scene's path-traced cost. Converged renders share no keyframes across speeds
-  (:func:`simspad.dataset.plan.shares_keyframes`), and the plan's layouts say so.
+  with the cache already on disk, at 128 px wide and 16 and 64 camera rays, fitted as above. Their noise probe is
+  three converged keyframes (keyframe 0 with the next seed and from each half of the cache). Converged renders
+  share no keyframes across speeds (:func:`simspad.dataset.plan.shares_keyframes`), and the plan's layouts say so.
 - **Simulation time**: one throughput probe of the ground truth and of each of the spec's sensors on a small
   render, measured at two durations so imports, JIT and file creation drop out (marginal costs), scaled by each
   sensor's work units from its sensor-table row (:meth:`~simspad.sensors.registry.Sensor.work_units`: Gbit of
@@ -58,7 +58,7 @@ from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write
 from simspad.io.geometry import GEOMETRY_BYTES_PER_PX, read_geometry, write_geometry
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
-from simspad.render.converged import converged_renderer, layout_convergence
+from simspad.render.converged import cache_block, converged_renderer, layout_convergence
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import CUDA_VARIANT, cuda_device_name, select_variant
 from simspad.render.render_layout import chunk_size_for
@@ -81,6 +81,13 @@ CALIBRATION_WIDTH_PX = 64
 CALIBRATION_KEYFRAMES = 2
 CALIBRATION_SPP = (4, 64)  # powers of four: the stratified (multi-jittered) sampler, as renders at these counts
 CALIBRATION_SPAN_S = 0.02
+#: Converged calibration: its keyframes at this width and these camera-ray counts, from a cache of
+#: :data:`CALIBRATION_CACHE_SAMPLES` estimates per point (the build's cost is linear in its estimates: scaled to
+#: the sequence's). At 64 px and 4 rays a converged keyframe's fixed cost (kernel launches, the coarse levels'
+#: lookups) hid its slope: a fit gave one scene 0 s per MP·spp and another more than path tracing.
+CONVERGED_CALIBRATION_WIDTH_PX = 128
+CONVERGED_CALIBRATION_SPP = (16, 64)
+CALIBRATION_CACHE_SAMPLES = 64
 #: Throughput probe: size (px) and the two simulated durations (s) whose difference gives marginal costs. 40 ms
 #: between them: with 16 ms, an event camera's marginal cost on 64 × 48 px (~30 ms of CPU) was within the noise of
 #: the process's CPU time and came out as ≈ 0 in one estimate of five.
@@ -136,6 +143,12 @@ class _PeakRss:
             self.bytes = max(peak - self.base, 0)
 
 
+def _probe_mrays(width: int, height: int, fields: dict) -> float:
+    """Millions of probe rays per view of a converged render (``fields``: its ``renderer.convergence``)."""
+    block = cache_block(width, fields.get("cache_width_px", width))
+    return -(-width // block) * -(-height // block) / 1e6
+
+
 @dataclass
 class SceneRenderCost:
     """Measured render cost of one scene, one thread: ``a_s + b_s·(MP·spp)`` per keyframe."""
@@ -147,20 +160,21 @@ class SceneRenderCost:
     process_rss_bytes: int | None  # peak RSS of the calibrating process (imports, scene, renders)
     load_s: float = 0.0  # CPU seconds to load the scene (once per chunk of keyframes)
     #: Converged renders only: seconds of one irradiance-cache build in the calibration, and its size there
-    #: (megapixels × cache_probes × cache_samples: the irradiance estimates it makes, per million pixels)
+    #: (probe rays per view in millions × cache_probes × cache_samples: the irradiance estimates it makes, per
+    #: million)
     cache_build_s: float = 0.0
     cache_build_units: float = 0.0
 
     def seconds_per_keyframe(self, megapixels: float, spp: int) -> float:
         return self.a_s + self.b_s * megapixels * spp
 
-    def cache_build_seconds(self, megapixels: float, cache_probes: int, cache_samples: int) -> float:
-        """Seconds of one cache build of a render of ``megapixels`` (0 for a path-traced calibration): the
-        calibration's build scaled by the estimates it makes (one camera ray per pixel of each probe view, each
-        vertex found given ``cache_samples`` irradiance estimates)."""
+    def cache_build_seconds(self, probe_mrays: float, cache_probes: int, cache_samples: int) -> float:
+        """Seconds of one cache build whose probe views trace ``probe_mrays`` million rays each (0 for a
+        path-traced calibration): the calibration's build scaled by the estimates it makes (each vertex a probe
+        ray finds is given ``cache_samples`` irradiance estimates)."""
         if self.cache_build_units <= 0:
             return 0.0
-        return self.cache_build_s * megapixels * cache_probes * cache_samples / self.cache_build_units
+        return self.cache_build_s * probe_mrays * cache_probes * cache_samples / self.cache_build_units
 
 
 @dataclass
@@ -191,7 +205,9 @@ def _settings(seq, resolution, duration_s, spp, converged: bool = False) -> Rend
     the unit costs are per rendered keyframe. Path-traced unless ``converged`` (then ``seq``'s cache settings)."""
     settings = replace(seq.render_settings(seed=1), resolution=tuple(resolution), duration_s=duration_s, spp=spp,
                        interpolation="linear")
-    return settings if converged else replace(settings, convergence="off")
+    if converged:
+        return replace(settings, cache_samples=min(settings.cache_samples, CALIBRATION_CACHE_SAMPLES))
+    return replace(settings, convergence="off")
 
 
 def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = False) -> SceneRenderCost:
@@ -209,14 +225,15 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
     # CPU time on the CPU (a busy machine must not inflate the unit cost); wall time on a GPU, which renders while
     # the calling thread waits (the EXR write reads the image back, so each render has finished when it returns)
     clock = time.perf_counter if on_gpu else time.process_time
-    w = CALIBRATION_WIDTH_PX
+    w = CONVERGED_CALIBRATION_WIDTH_PX if converged else CALIBRATION_WIDTH_PX
+    spps = CONVERGED_CALIBRATION_SPP if converged else CALIBRATION_SPP
     h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
     span_s = min(seq.duration_s, CALIBRATION_SPAN_S)
     cpu0 = time.process_time()
-    loaded = load_scene(seq.scene, seq.trajectory, w, h, CALIBRATION_SPP[0])
+    loaded = load_scene(seq.scene, seq.trajectory, w, h, spps[0])
     load_s = time.process_time() - cpu0  # every chunk of keyframes loads the scene once
     points, exr, rss, build = [], [], [], (0.0, 0.0)
-    for spp in CALIBRATION_SPP:
+    for spp in spps:
         loaded.ms.spp = spp  # mi.render takes the sample count per call; same scene, same film
         plan = layout_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp, converged),
                              loaded=loaded)
@@ -227,7 +244,7 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
             make_out_dir(out)
             cpu0 = clock()
             converged_renderer(plan, loaded.ms, loaded.ts, out)  # builds the cache and writes it into ``out``
-            build = (clock() - cpu0, w * h / 1e6 * fields["cache_probes"] * fields["cache_samples"])
+            build = (clock() - cpu0, _probe_mrays(w, h, fields) * fields["cache_probes"] * fields["cache_samples"])
             (out / "t").mkdir(parents=True, exist_ok=True)
             shutil.copy2(out / fields["cache_file"], out / "t" / fields["cache_file"])  # the timed keyframes' too
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
@@ -460,14 +477,16 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
         build = 0.0
         if fields is not None:  # the cache's build once per render, then every keyframe at its cost after it
             cost = costs.converged[name]
-            build = cost.cache_build_seconds(w * h / 1e6, fields["cache_probes"], fields["cache_samples"])
+            build = cost.cache_build_seconds(_probe_mrays(w, h, fields), fields["cache_probes"], fields["cache_samples"])
         per_kf = cost.seconds_per_keyframe(w * h / 1e6, seq.spp)
         keyframe_s.append((per_kf, n))
         scene_load_s.append((cost.load_s, n))
         if rp.warp is not None:
             n_warp += n
-        # and its noise probe: keyframe 0 once more, path-traced (the render-noise budget)
-        this = build + per_kf * n + traced.seconds_per_keyframe(w * h / 1e6, seq.spp)
+        # and its noise probe (the render-noise budget): keyframe 0 once more, path-traced; a converged render's is
+        # keyframe 0 from the same cache with the next seed and from each half of the cache
+        this = build + per_kf * n + (3 * per_kf if fields is not None else traced.seconds_per_keyframe(w * h / 1e6,
+                                                                                                      seq.spp))
         if fields is not None:
             n_converged += 1
             build_cpu += build

@@ -53,6 +53,9 @@ _BIN_NORMALS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [
 CHAIN_VERTICES = 3
 #: Path length used where the scene's integrator has none (max_depth = -1: Russian roulette only).
 UNLIMITED_DEPTH = 16
+#: Camera samples of one keyframe tile (whole pixel rows): each chain vertex keeps its interaction for the lookup,
+#: about 0.6 kB per lane over the three depths, so an untiled 512×512 keyframe at 64 rays held ~10 GiB.
+TILE_LANES = 1 << 20
 #: Lanes (points × estimates) of one irradiance-estimate kernel launch.
 Q_BATCH_LANES = 1 << 21
 _PRIMES = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93,
@@ -416,11 +419,27 @@ class ConvergedRenderer:
     def render(self, cache: IrradianceCache | None, seed: int, object_poses: dict | None = None) -> np.ndarray:
         """The keyframe at the current pose: [H, W, 3] float32 radiance, blurred like a path-traced keyframe.
 
+        The camera samples are traced in tiles of whole pixel rows, at most :data:`TILE_LANES` lanes each, so a
+        keyframe's memory is bounded whatever its size (:meth:`_render_lanes` per tile); the first tile's random
+        numbers are those of the whole keyframe, so a keyframe of one tile is the same at any size limit."""
+        h, w = self.ms.height, self.ms.width
+        pos = self.camera_samples(seed)
+        rows = max(1, TILE_LANES // (w * self.spp))
+        total = np.empty((pos.shape[0], 3))
+        for k, row in enumerate(range(0, h, rows)):
+            a, b = row * w * self.spp, min(row + rows, h) * w * self.spp
+            total[a:b] = self._render_lanes(cache, pos[a:b], seed if k == 0 else _mix(seed, 4000 + k), object_poses)
+        rgb = total.reshape(h, w, self.spp, 3).mean(axis=2).astype(np.float32)
+        return np.maximum(psf_blur(rgb), 0.0, dtype=np.float32)
+
+    def _render_lanes(self, cache: IrradianceCache | None, pos: np.ndarray, seed: int,
+                      object_poses: dict | None) -> np.ndarray:
+        """Radiance [N, 3] of the camera samples at film positions ``pos`` [N, 2].
+
         The finest level's lookup runs in Dr.Jit on every lane of the chain (:meth:`_lookup_lanes`); only the
         vertices it leaves without light are read back to numpy, for the coarser levels, the next-closest normal
         bins and, where nothing covers them, an estimate of their own."""
         dr = self.dr
-        pos = self.camera_samples(seed)
         ray = self._camera_rays(pos)
         emitted, lanes = self.trace_chain(ray, seed)
         total = emitted
@@ -462,9 +481,7 @@ class ConvergedRenderer:
                 q[m], est = est[:m.size], est[m.size:]
         for v, q in zip(vertices, qs):
             np.add.at(total, v["idx"], v["weight"] * q)
-        h, w = self.ms.height, self.ms.width
-        rgb = total.reshape(h, w, self.spp, 3).mean(axis=2).astype(np.float32)
-        return np.maximum(psf_blur(rgb), 0.0, dtype=np.float32)
+        return total
 
     def _lookup_lanes(self, cache: IrradianceCache, lane: dict, object_poses: dict | None):
         """Q at every lane of a chain vertex from the cache's finest level, trilinear between the 8 cells around
@@ -535,12 +552,28 @@ class ConvergedRenderer:
             x[sel] = ((x[sel] - t) if point else x[sel]) @ r  # r⁻¹ = rᵀ for a rigid motion
         return x
 
-    def cache_samples(self, seed: int, q_samples: int, object_poses: dict | None = None, stride: int = 1):
-        """Q estimates at the chain vertices of the current view (every ``stride``-th camera sample):
-        (rest-frame points, normals, object ids, Q, sample counts, Q of the first and of the second half of the
-        samples)."""
-        pos = self.camera_samples(seed)[::stride]
-        ray = self._camera_rays(pos)
+    def probe_samples(self, seed: int, block: int = 1) -> np.ndarray:
+        """Film positions [N, 2] of a probe view: one ray per ``block`` × ``block`` pixels, jittered within it (block
+        1: :meth:`camera_samples` at one ray per pixel, the positions of renders before blocks existed)."""
+        if block == 1:
+            spp = self.spp
+            self.spp = 1
+            try:
+                return self.camera_samples(seed)
+            finally:
+                self.spp = spp
+        w, h = self.ms.width, self.ms.height
+        bw, bh = -(-w // block), -(-h // block)
+        u = np.random.default_rng([seed, 0xB10C]).random((bh, bw, 2))
+        xs = np.minimum((np.arange(bw)[None, :] + u[..., 0]) * block, w * (1 - 1e-7)) / w
+        ys = np.minimum((np.arange(bh)[:, None] + u[..., 1]) * block, h * (1 - 1e-7)) / h
+        return np.stack([xs, ys], axis=-1).reshape(-1, 2)
+
+    def cache_samples(self, seed: int, q_samples: int, object_poses: dict | None = None, block: int = 1):
+        """Q estimates at the chain vertices of the current view (one probe ray per ``block`` × ``block``
+        pixels: :meth:`probe_samples`): (rest-frame points, normals, object ids, Q, sample counts, Q of the
+        first and of the second half of the samples)."""
+        ray = self._camera_rays(self.probe_samples(seed, block))
         _, lanes = self.trace_chain(ray, seed)
         vertices = [v for v in map(self.vertex_arrays, lanes) if v["idx"].size]
         if not vertices:
@@ -622,26 +655,29 @@ def probe_indices(n_keyframes: int, n_probes: int) -> list[int]:
     return sorted({int(round(x)) for x in np.linspace(0, n_keyframes - 1, max(1, min(n_probes, n_keyframes)))})
 
 
-def build_cache(cr: ConvergedRenderer, poses: list, seed: int, q_samples: int, cell_px: float) -> IrradianceCache:
+def cache_block(width: int, cache_width_px: int) -> int:
+    """Pixels per probe ray along each axis for an image ``width`` px wide: the probe views are traced on a grid
+    about ``cache_width_px`` wide (1 at or below it)."""
+    return max(1, int(round(width / cache_width_px)))
+
+
+def build_cache(cr: ConvergedRenderer, poses: list, seed: int, q_samples: int, cell_px: float,
+                block: int = 1) -> IrradianceCache:
     """Converge the cache from the probe views ``poses`` (a list of (camera_to_world, {object: pose})): one
-    camera ray per pixel of each view (its own jitter), followed through its glossy/specular chain, and
-    ``q_samples`` irradiance estimates at every vertex found. The finest cell is ``cell_px`` pixel footprints
-    at the first view's median depth."""
+    camera ray per ``block`` × ``block`` pixels of each view (its own jitter), followed through its
+    glossy/specular chain, and ``q_samples`` irradiance estimates at every vertex found. The finest cell is
+    ``cell_px`` × ``block`` pixel footprints at the first view's median depth, so each cell gathers as many probe
+    points whatever the block."""
     ms = cr.ms
     parts = []
     cell_m = None
-    spp = cr.spp
-    cr.spp = 1
-    try:
-        for k, (camera_to_world, objects) in enumerate(poses):
-            ms.set_pose(np.asarray(camera_to_world), objects)
-            if cell_m is None:
-                z = ms.render_depth(seed)
-                z = z[np.isfinite(z)]
-                cell_m = cell_px * (float(np.median(z)) if z.size else 1.0) / ms.focal_px
-            parts.append(cr.cache_samples(_mix(seed, 77 + k), q_samples, objects))
-    finally:
-        cr.spp = spp
+    for k, (camera_to_world, objects) in enumerate(poses):
+        ms.set_pose(np.asarray(camera_to_world), objects)
+        if cell_m is None:
+            z = ms.render_depth(seed)
+            z = z[np.isfinite(z)]
+            cell_m = cell_px * block * (float(np.median(z)) if z.size else 1.0) / ms.focal_px
+        parts.append(cr.cache_samples(_mix(seed, 77 + k), q_samples, objects, block))
     p, n, obj, q, w, q_a, q_b = (np.concatenate([part[i] for part in parts]) for i in range(7))
     return IrradianceCache.from_samples(cell_m, p, n, obj.astype(np.int64), q, w, halves=(q_a, q_b))
 
@@ -695,7 +731,8 @@ def converged_renderer(layout, ms, ts, out_dir) -> tuple[ConvergedRenderer, Irra
                   {k: np.asarray(m) for k, m in layout.objects_to_world[i].items()} if layout.objects_to_world
                   else object_poses(ts, layout.times_s[i]))
                  for i in probe_indices(layout.n_keyframes, fields["cache_probes"])]
-        cache = build_cache(cr, poses, layout.seed, fields["cache_samples"], fields["cache_cell_px"])
+        cache = build_cache(cr, poses, layout.seed, fields["cache_samples"], fields["cache_cell_px"],
+                            cache_block(layout.width, fields.get("cache_width_px", layout.width)))
         save_cache(cache, path)
     return cr, cache
 

@@ -406,7 +406,7 @@ def convergence_fields(settings: RenderSettings) -> dict | None:
         return None
     return {"mode": settings.convergence, "cache_samples": int(settings.cache_samples),
             "cache_cell_px": float(settings.cache_cell_px), "cache_probes": int(settings.cache_probes),
-            "chain_vertices": CHAIN_VERTICES, "levels": list(LEVELS)}
+            "cache_width_px": int(settings.cache_width_px), "chain_vertices": CHAIN_VERTICES, "levels": list(LEVELS)}
 
 
 def cache_file_name(base_key: dict) -> str:

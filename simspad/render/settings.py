@@ -50,6 +50,11 @@ DEFAULT_CONVERGENCE = "off"
 #: and 2.9 % off a 4096-spp multi-jittered pair at 64 camera rays (256 estimates in 1-px cells: 4.4 and 4.3 %).
 DEFAULT_CACHE_SAMPLES = 1024
 DEFAULT_CACHE_CELL_PX = 2.0
+#: Width (px) of the grid the cache's probe views are traced on (``cache_width_px``): a wider render traces one
+#: probe ray per block of pixels and its cells are as many pixels wider, so the cells keep their size in the scene
+#: and the cache's build stops growing with the resolution. At 256×192 on the office (keyframe 0, 4096-spp pair)
+#: 2-px cells of a 128-px grid are 2.3-2.6 % off, of a 64-px grid 2.8-3.1 % (docs/rendering.md, fifth round).
+DEFAULT_CACHE_WIDTH_PX = 128
 
 
 @dataclass(frozen=True)
@@ -99,6 +104,10 @@ class RenderSettings:
         With ``"cache"``: the cache's finest cell, in pixel footprints at the probe views' median depth.
     cache_probes : int
         With ``"cache"``: probe views, spread evenly over the render's keyframes, that fill the cache.
+    cache_width_px : int
+        With ``"cache"``: the probe views are traced on a grid about this many pixels wide (one ray per pixel
+        at or below it, one per block of round(width / cache_width_px)² pixels above), and ``cache_cell_px``
+        counts that grid's pixels.
     """
 
     duration_s: float
@@ -117,6 +126,7 @@ class RenderSettings:
     cache_samples: int = DEFAULT_CACHE_SAMPLES
     cache_cell_px: float = DEFAULT_CACHE_CELL_PX
     cache_probes: int = 4
+    cache_width_px: int = DEFAULT_CACHE_WIDTH_PX
 
     def checked_size(self) -> tuple[int, int]:
         """Check every field; return (width, height) in pixels.
@@ -182,6 +192,9 @@ class RenderSettings:
             bad("cache_cell_px", f"must be a number of pixels in [0.25, 64], got {self.cache_cell_px!r}")
         if not (isinstance(self.cache_probes, numbers.Integral) and 1 <= self.cache_probes <= 256):
             bad("cache_probes", f"must be an integer in [1, 256], got {self.cache_probes!r}")
+        if not (isinstance(self.cache_width_px, numbers.Integral) and not isinstance(self.cache_width_px, bool)
+                and 8 <= self.cache_width_px <= 65536):
+            bad("cache_width_px", f"must be an integer number of pixels in [8, 65536], got {self.cache_width_px!r}")
         return out
 
 

@@ -54,7 +54,8 @@ def test_normal_bins_and_probe_indices():
 
 
 @pytest.mark.parametrize("field, value", [("convergence", "denoise"), ("cache_samples", 0),
-                                          ("cache_cell_px", 0.0), ("cache_probes", 0)])
+                                          ("cache_cell_px", 0.0), ("cache_probes", 0), ("cache_width_px", 4),
+                                          ("cache_width_px", 128.0)])
 def test_bad_convergence_settings_are_refused(field, value):
     with pytest.raises(SimSpadError) as err:
         RenderSettings(duration_s=0.01, **{field: value}).checked_size()
@@ -233,3 +234,73 @@ def test_a_converged_render_of_moving_objects_compiles_its_kernels_once(tmp_path
                                                           convergence="cache", cache_samples=16),
                               out_dir=tmp_path / "fan", progress=False)
     assert summary.n_rendered >= 4 and summary.compiled_after_first == 0, summary
+
+
+def _office_cache(block: int = 1, rays: int = 16, size=(32, 24)):
+    """The office at ``size`` with a small cache (2 probe views, 8 estimates per point, 2-px cells of a probe grid of
+    ``block``-px blocks), posed at its last probe view: (renderer, cache, object poses)."""
+    from simspad.render import converged as cv
+    from simspad.render.flow import object_poses
+    from simspad.render.renderer import layout_render, load_scene
+
+    loaded = load_scene("office", None, *size, rays)
+    layout = layout_render("office", None, RenderSettings(duration_s=0.004, resolution=size, spp=rays), loaded=loaded)
+    poses = [(np.asarray(layout.camera_to_world[i]), object_poses(loaded.ts, layout.times_s[i]))
+             for i in (0, layout.n_keyframes - 1)]
+    cr = cv.ConvergedRenderer(loaded.ms, rays)
+    cache = cv.build_cache(cr, poses, 0, 8, 2.0, block)
+    loaded.ms.set_pose(*poses[1])
+    return cr, cache, poses[1][1]
+
+
+@pytest.mark.slow
+def test_a_keyframe_traced_in_tiles_is_the_whole_keyframe_where_it_draws_the_same_numbers(monkeypatch):
+    # Tiles of 4 pixel rows: the first tile draws the whole keyframe's random numbers (its rows are the same, up to
+    # the blur's reach into the second tile), the others their own: the same image up to the glossy chains' noise.
+    from simspad.render import converged as cv
+    from simspad.render.mitsuba_scene import PSF_REACH_PX
+
+    cr, cache, objects = _office_cache()
+    whole = cr.render(cache, 3, objects)
+    monkeypatch.setattr(cv, "TILE_LANES", 4 * 32 * 16)
+    tiled = cr.render(cache, 3, objects)
+    assert np.array_equal(tiled[:4 - PSF_REACH_PX], whole[:4 - PSF_REACH_PX])
+    assert not np.array_equal(tiled, whole)  # the other tiles drew other numbers
+    lum = lambda rgb: rgb @ np.array([0.2126, 0.7152, 0.0722])  # noqa: E731
+    rel = np.abs(lum(tiled) - lum(whole)) / lum(whole)
+    assert np.median(rel) < 0.01 and abs(lum(tiled).mean() / lum(whole).mean() - 1) < 0.01
+
+
+def test_the_probe_grid_is_the_image_up_to_its_width_then_blocks():
+    from simspad.render.converged import cache_block
+
+    assert [cache_block(w, 128) for w in (16, 80, 128, 191, 256, 512)] == [1, 1, 1, 1, 2, 4]
+
+
+@pytest.mark.slow
+def test_a_coarser_probe_grid_makes_cells_as_wide_in_the_scene_and_the_same_light():
+    # Probe rays one per 2×2 pixels: cells twice as wide (the same 2 px of the probe grid), about a quarter of the
+    # probe points, and a keyframe lit from it is the one lit from the per-pixel grid's cache, up to the caches' noise.
+    cr, fine, objects = _office_cache(block=1)
+    _, coarse, _ = _office_cache(block=2)
+    assert coarse.cell_m == pytest.approx(2 * fine.cell_m, rel=1e-12)
+    assert 0.15 < coarse.counts[1].sum() / fine.counts[1].sum() < 0.35
+    lum = lambda rgb: rgb @ np.array([0.2126, 0.7152, 0.0722])  # noqa: E731
+    a, b = lum(cr.render(fine, 3, objects)), lum(cr.render(coarse, 3, objects))
+    assert abs(b.mean() / a.mean() - 1) < 0.05
+
+
+@pytest.mark.slow
+def test_simspad_render_converges_unless_spp_is_given(tmp_path):
+    # `simspad render` with no quality flag: the cache at 64 camera rays; `--spp N` alone: path tracing, the reference.
+    from simspad.cli.app import main
+
+    common = ["siemens-star", "--duration", "0.001", "--resolution", "16x12"]
+    assert main(["render", *common, "--cache-samples", "16", "--out", str(tmp_path / "c")]) == 0
+    assert main(["render", *common, "--spp", "4", "--out", str(tmp_path / "p")]) == 0
+    assert main(["render", *common, "--convergence", "off", "--out", str(tmp_path / "o")]) == 0
+    renderer = {k: json.loads((tmp_path / k / "timeline.json").read_text())["renderer"] for k in "cpo"}
+    assert renderer["c"]["spp"] == 64 and renderer["c"]["convergence"]["mode"] == "cache"
+    assert renderer["c"]["convergence"]["cache_width_px"] == 128
+    assert renderer["p"]["spp"] == 4 and not renderer["p"].get("convergence")
+    assert renderer["o"]["spp"] == 16 and not renderer["o"].get("convergence")
