@@ -23,7 +23,8 @@ def describe_spec(path) -> str:
              f"{len(spec.sequences) * len(spec.speed) * len(spec.lux)} recordings)"]
     for s in spec.sequences:
         traj = _short(s.trajectory) if s.trajectory is not None else _default_trajectory_text(s.scene)
-        lines.append(f"    {s.name}: scene {_short(s.scene)}, {s.resolution[0]}×{s.resolution[1]} px, {s.spp} spp, "
+        lines.append(f"    {s.name}: scene {_short(s.scene)}, {s.resolution[0]}×{s.resolution[1]} px, "
+                     f"{s.spp} {'spp' if s.convergence == 'off' else 'camera rays per pixel'}, "
                      f"{s.start_s:g}–{s.start_s + s.duration_s:g} s, trajectory {traj}"
                      + (f", {s.interpolation} interpolation" if s.interpolation != "linear" else "")
                      + (f", convergence {s.convergence} ({s.cache_samples} estimates per cache point)"

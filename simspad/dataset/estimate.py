@@ -12,7 +12,7 @@ spec's sizes.
   apart: the irradiance cache's build, once per render, timed on its own and scaled by ``cache_probes`` × the
   probe rays per view × ``cache_samples`` relative to the calibration's (:meth:`SceneRenderCost.
   cache_build_seconds`); and each keyframe's (camera rays, glossy chain, cache lookups), timed after the build
-  with the cache already on disk, at 128 px wide and 16 and 64 camera rays, fitted as above. Their noise probe is
+  with the cache already on disk, at 256 px wide and 16 and 64 camera rays, fitted as above. Their noise probe is
   three converged keyframes (keyframe 0 with the next seed and from each half of the cache). Converged renders
   share no keyframes across speeds (:func:`simspad.dataset.plan.shares_keyframes`), and the plan's layouts say so.
 - **Simulation time**: one throughput probe of the ground truth and of each of the spec's sensors on a small
@@ -84,8 +84,10 @@ CALIBRATION_SPAN_S = 0.02
 #: Converged calibration: its keyframes at this width and these camera-ray counts, from a cache of
 #: :data:`CALIBRATION_CACHE_SAMPLES` estimates per point (the build's cost is linear in its estimates: scaled to
 #: the sequence's). At 64 px and 4 rays a converged keyframe's fixed cost (kernel launches, the coarse levels'
-#: lookups) hid its slope: a fit gave one scene 0 s per MP·spp and another more than path tracing.
-CONVERGED_CALIBRATION_WIDTH_PX = 128
+#: lookups) hid its slope: a fit gave one scene 0 s per MP·spp and another more than path tracing; at 128 px the
+#: office's fit (0.11 s per MP·spp) put a 512×512, 16-ray keyframe at 0.7 CPU-s where it takes 1.6 (a keyframe's
+#: lanes fill a tile of 2²⁰ only from 256 px on, and its arrays outgrow the CPU's caches).
+CONVERGED_CALIBRATION_WIDTH_PX = 256
 CONVERGED_CALIBRATION_SPP = (16, 64)
 CALIBRATION_CACHE_SAMPLES = 64
 #: Throughput probe: size (px) and the two simulated durations (s) whose difference gives marginal costs. 40 ms
@@ -560,15 +562,16 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
              f"  renders      {est.n_renders} sequence(s), {est.n_keyframes} keyframes, "
              + (f"{est.render_cpu_s / 3600:.2f} GPU-h on {est.render_gpu} ({costs.render_variant}, measured on it)"
                 if est.render_gpu else f"{est.render_cpu_s / 3600:.2f} CPU-h"),
-             *([f"               and {est.n_noise_probes} noise probes (one keyframe per render: the "
-                f"render-noise budget), counted in that time"] if est.n_noise_probes else []),
+             *([f"               and {est.n_noise_probes} noise probes (one keyframe per render, three per "
+                f"converged one: the render-noise budget), counted in that time"] if est.n_noise_probes else []),
              *([f"               {est.n_warp_keyframes} of them in warp renders, costed as if each were "
                 f"rendered: an upper bound (how many a warp render renders depends on where its warps agree)"]
                if est.n_warp_keyframes else []),
              *([f"               plus {est.n_shared_keyframes} keyframes the faster speeds share with the slower "
                 f"ones (the same poses: linked, not rendered)"] if est.n_shared_keyframes else []),
              *([f"               {est.n_converged_renders} converged render(s) (irradiance cache): cache builds "
-                f"{hours(est.cache_build_s)} (one per render, × its W·H × cache_probes × cache_samples), their "
+                f"{hours(est.cache_build_s)} (one per render, × its probe rays × cache_probes × cache_samples), "
+                f"their "
                 f"keyframes {hours(est.converged_keyframe_s)} after the build"] if est.n_converged_renders else []),
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",

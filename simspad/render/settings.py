@@ -33,16 +33,13 @@ INTERPOLATIONS = ("warp", "linear")
 DEFAULT_INTERPOLATION = "linear"
 #: Radiance modes: ``"off"`` path-traces every pixel of a keyframe (the reference); ``"cache"`` converges the
 #: diffuse irradiance once per render into a world-space cache and gives each keyframe primary visibility, its
-#: glossy/specular chain and a cache lookup (:mod:`simspad.render.converged`). "off" until the cache meets its bar
-#: on every built-in scene (median error <= 3 % against a converged reference, noise-free events within 10 %, at
-#: <= 1/4 of the 64-spp linear schedule's CPU). Measured at 48x36 over 10 ms (benchmarks/bench_convergence.py, 64
-#: camera rays, 256 estimates per probe point): office 4.9 % error, events 0.88-1.52x the reference's; plant
-#: 5.0 %, 1.11-1.16x; Siemens star 1.4 %, 1.01-1.02x; fan 1.9 %, 0.94-1.01x; 4-7x the CPU of 64-spp path tracing
-#: at that size (office 11.9 against 3.1 CPU-s, star 4.3 against 0.6).
-#: Second round (a 4096-spp x 2 reference, 20 ms at 48x36, with warp): office 4.8 %, plant 5.3 % (events 0.95-1.36x
-#: of a one-seed reference), piano 2.1 %, fan 1.9 %, star 1.2 %, at 1-5x the 64-spp linear schedule's CPU.
-#: docs/rendering.md has the tables and what was tried. It works with either interpolation: with ``"warp"`` the
-#: anchors are converged keyframes and the warps are judged against a converged render's own noise.
+#: glossy/specular chain and a cache lookup (:mod:`simspad.render.converged`): on every built-in scene at 48×36 px,
+#: default and ×16 trajectories, 0.7-3.0 % off a 4096-spp pair per pixel (64 camera rays) where 64-spp path
+#: tracing is 1.2-17.6 %; the office at 256×256 over 0.2 s at 16 rays in 0.17× the 64-spp schedule's CPU
+#: (docs/rendering.md has the tables and what was tried). ``simspad render`` and both bundled specs converge; the
+#: record's default stays ``"off"`` so a spec or script that does not ask keeps its pixels and hash. It works with
+#: either interpolation: with ``"warp"`` the anchors are converged keyframes and the warps are judged against a
+#: converged render's own noise.
 CONVERGENCE_MODES = ("off", "cache")
 DEFAULT_CONVERGENCE = "off"
 #: Default irradiance estimates per cache point (``cache_samples``; ``--cache-samples``, and a dataset spec's) and
