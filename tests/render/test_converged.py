@@ -236,31 +236,39 @@ def test_a_converged_render_of_moving_objects_compiles_its_kernels_once(tmp_path
     assert summary.n_rendered >= 4 and summary.compiled_after_first == 0, summary
 
 
-def _office_cache(block: int = 1, rays: int = 16, size=(32, 24)):
-    """The office at ``size`` with a small cache (2 probe views, 8 estimates per point, 2-px cells of a probe grid of
-    ``block``-px blocks), posed at its last probe view: (renderer, cache, object poses)."""
-    from simspad.render import converged as cv
+@pytest.fixture(scope="module")
+def office_32x24():
+    """The office at 32×24 px, 16 camera rays, and two probe views of its default trajectory: (scene, poses)."""
     from simspad.render.flow import object_poses
     from simspad.render.renderer import layout_render, load_scene
 
-    loaded = load_scene("office", None, *size, rays)
-    layout = layout_render("office", None, RenderSettings(duration_s=0.004, resolution=size, spp=rays), loaded=loaded)
-    poses = [(np.asarray(layout.camera_to_world[i]), object_poses(loaded.ts, layout.times_s[i]))
-             for i in (0, layout.n_keyframes - 1)]
-    cr = cv.ConvergedRenderer(loaded.ms, rays)
+    loaded = load_scene("office", None, 32, 24, 16)
+    layout = layout_render("office", None, RenderSettings(duration_s=0.004, resolution=(32, 24), spp=16),
+                           loaded=loaded)
+    return loaded, [(np.asarray(layout.camera_to_world[i]), object_poses(loaded.ts, layout.times_s[i]))
+                    for i in (0, layout.n_keyframes - 1)]
+
+
+def _office_cache(office, block: int = 1):
+    """A small cache of ``office`` (2 probe views, 8 estimates per point, 2-px cells of a probe grid of
+    ``block``-px blocks), the scene posed at its last probe view: (renderer, cache, object poses)."""
+    from simspad.render import converged as cv
+
+    loaded, poses = office
+    cr = cv.ConvergedRenderer(loaded.ms, 16)
     cache = cv.build_cache(cr, poses, 0, 8, 2.0, block)
     loaded.ms.set_pose(*poses[1])
     return cr, cache, poses[1][1]
 
 
 @pytest.mark.slow
-def test_a_keyframe_traced_in_tiles_is_the_whole_keyframe_where_it_draws_the_same_numbers(monkeypatch):
+def test_a_keyframe_traced_in_tiles_is_the_whole_keyframe_where_it_draws_the_same_numbers(office_32x24, monkeypatch):
     # Tiles of 4 pixel rows: the first tile draws the whole keyframe's random numbers (its rows are the same, up to
     # the blur's reach into the second tile), the others their own: the same image up to the glossy chains' noise.
     from simspad.render import converged as cv
     from simspad.render.mitsuba_scene import PSF_REACH_PX
 
-    cr, cache, objects = _office_cache()
+    cr, cache, objects = _office_cache(office_32x24)
     whole = cr.render(cache, 3, objects)
     monkeypatch.setattr(cv, "TILE_LANES", 4 * 32 * 16)
     tiled = cr.render(cache, 3, objects)
@@ -278,11 +286,11 @@ def test_the_probe_grid_is_the_image_up_to_its_width_then_blocks():
 
 
 @pytest.mark.slow
-def test_a_coarser_probe_grid_makes_cells_as_wide_in_the_scene_and_the_same_light():
+def test_a_coarser_probe_grid_makes_cells_as_wide_in_the_scene_and_the_same_light(office_32x24):
     # Probe rays one per 2×2 pixels: cells twice as wide (the same 2 px of the probe grid), about a quarter of the
     # probe points, and a keyframe lit from it is the one lit from the per-pixel grid's cache, up to the caches' noise.
-    cr, fine, objects = _office_cache(block=1)
-    _, coarse, _ = _office_cache(block=2)
+    _, coarse, _ = _office_cache(office_32x24, block=2)
+    cr, fine, objects = _office_cache(office_32x24, block=1)
     assert coarse.cell_m == pytest.approx(2 * fine.cell_m, rel=1e-12)
     assert 0.15 < coarse.counts[1].sum() / fine.counts[1].sum() < 0.35
     lum = lambda rgb: rgb @ np.array([0.2126, 0.7152, 0.0722])  # noqa: E731
