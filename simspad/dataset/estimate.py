@@ -9,10 +9,11 @@ spec's sizes.
   on one thread, at a small size and two sample counts, fitted as ``a + b·(megapixels·spp)`` (fixed part: scene
   traversal, depth pass, EXR write; variable part: path tracing).
 - **Converged renders** (``convergence = "cache"``, :mod:`simspad.render.converged`) pay two costs, calibrated
-  apart: the irradiance cache's build, once per render, timed on its own and scaled by ``cache_probes`` × the
-  probe rays per view × ``cache_samples`` relative to the calibration's (:meth:`SceneRenderCost.
+  apart: the irradiance cache's build, once per render, timed on its own (64 px wide, the sequence's estimates per
+  point) and scaled by ``cache_probes`` × the probe rays per view × ``cache_samples`` relative to the calibration's (:meth:`SceneRenderCost.
   cache_build_seconds`); and each keyframe's (camera rays, glossy chain, cache lookups), timed after the build
-  with the cache already on disk, at 256 px wide and 16 and 64 camera rays, fitted as above. Their noise probe is
+  with the cache already on disk, at the sequence's width up to 256 px and 16 and 64 camera rays, fitted as
+  above. Their noise probe is
   three converged keyframes (keyframe 0 with the next seed and from each half of the cache). Converged renders
   share no keyframes across speeds (:func:`simspad.dataset.plan.shares_keyframes`), and the plan's layouts say so.
 - **Simulation time**: one throughput probe of the ground truth and of each of the spec's sensors on a small
@@ -82,11 +83,12 @@ CALIBRATION_KEYFRAMES = 2
 CALIBRATION_SPP = (4, 64)  # powers of four: the stratified (multi-jittered) sampler, as renders at these counts
 CALIBRATION_SPAN_S = 0.02
 #: Converged calibration: its keyframes at this width and these camera-ray counts, from a cache of
-#: :data:`CALIBRATION_CACHE_SAMPLES` estimates per point (the build's cost is linear in its estimates: scaled to
-#: the sequence's). At 64 px and 4 rays a converged keyframe's fixed cost (kernel launches, the coarse levels'
+#: :data:`CALIBRATION_CACHE_SAMPLES` estimates per point (its build with the sequence's estimates is timed apart,
+#: at :data:`CALIBRATION_WIDTH_PX`). At 64 px and 4 rays a converged keyframe's fixed cost (kernel launches, the coarse levels'
 #: lookups) hid its slope: a fit gave one scene 0 s per MP·spp and another more than path tracing; at 128 px the
 #: office's fit (0.11 s per MP·spp) put a 512×512, 16-ray keyframe at 0.7 CPU-s where it takes 1.6 (a keyframe's
-#: lanes fill a tile of 2²⁰ only from 256 px on, and its arrays outgrow the CPU's caches).
+#: lanes fill a tile of 2²⁰ only from 256 px on, and its arrays outgrow the CPU's caches). A narrower sequence is
+#: calibrated at its own width.
 CONVERGED_CALIBRATION_WIDTH_PX = 256
 CONVERGED_CALIBRATION_SPP = (16, 64)
 CALIBRATION_CACHE_SAMPLES = 64
@@ -216,9 +218,11 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
     """Time :data:`CALIBRATION_KEYFRAMES` keyframes of ``seq``'s scene along its trajectory at two sample counts
     (one scene load): on one CPU thread, or on the GPU ``gpu`` (its name) when the variant renders there.
 
-    ``converged``: with ``seq``'s irradiance cache (its ``cache_samples`` and probe views). The cache is built on
-    its own first, timed (at the second sample count: the first pays the kernels' compilation), and the keyframes
-    are timed after it, with the cache on disk as a render's later chunks find it."""
+    ``converged``: with an irradiance cache of ``seq``'s probe views (of :data:`CALIBRATION_CACHE_SAMPLES`
+    estimates: a keyframe's cost does not depend on them), at ``seq``'s width up to
+    :data:`CONVERGED_CALIBRATION_WIDTH_PX`; the keyframes are timed after its build, with the cache on disk as a
+    render's later chunks find it. The build with ``seq``'s own estimates is timed apart
+    (:func:`_time_cache_build`)."""
     import drjit as dr  # deferred: heavy; the variant is already set
 
     on_gpu = gpu is not None
@@ -227,7 +231,9 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
     # CPU time on the CPU (a busy machine must not inflate the unit cost); wall time on a GPU, which renders while
     # the calling thread waits (the EXR write reads the image back, so each render has finished when it returns)
     clock = time.perf_counter if on_gpu else time.process_time
-    w = CONVERGED_CALIBRATION_WIDTH_PX if converged else CALIBRATION_WIDTH_PX
+    # a converged keyframe's fixed part grows with its pixels (camera samples, blur, file), which a + b·MP·spp
+    # cannot tell apart from a constant: calibrated at the sequence's own width up to 256 px
+    w = min(CONVERGED_CALIBRATION_WIDTH_PX, int(seq.resolution[0])) if converged else CALIBRATION_WIDTH_PX
     spps = CONVERGED_CALIBRATION_SPP if converged else CALIBRATION_SPP
     h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
     span_s = min(seq.duration_s, CALIBRATION_SPAN_S)
@@ -244,9 +250,7 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
         fields = layout_convergence(plan)
         if fields is not None:
             make_out_dir(out)
-            cpu0 = clock()
             converged_renderer(plan, loaded.ms, loaded.ts, out)  # builds the cache and writes it into ``out``
-            build = (clock() - cpu0, _probe_mrays(w, h, fields) * fields["cache_probes"] * fields["cache_samples"])
             (out / "t").mkdir(parents=True, exist_ok=True)
             shutil.copy2(out / fields["cache_file"], out / "t" / fields["cache_file"])  # the timed keyframes' too
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
@@ -257,6 +261,8 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
             points.append((w * h / 1e6 * spp, (clock() - cpu0) / len(timed)))
         exr.append(np.mean([(out / "t" / plan.names[i]).stat().st_size for i in timed]) / (w * h))
         rss.append(peak.bytes)
+    if converged:
+        build = _time_cache_build(seq, tmp, span_s, clock)
     if not on_gpu:
         dr.set_thread_count(default_workers())
     (x1, y1), (x2, y2) = points
@@ -266,6 +272,28 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
     return SceneRenderCost(a_s=a, b_s=b, exr_bytes_per_px=float(np.mean(exr)), rss_bytes_per_mp_spp=slope,
                            process_rss_bytes=_vm_hwm_bytes(), load_s=load_s, cache_build_s=build[0],
                            cache_build_units=build[1])
+
+
+def _time_cache_build(seq, tmp: Path, span_s: float, clock) -> tuple[float, float]:
+    """(seconds, size) of one build of ``seq``'s irradiance cache with its own estimates per point, at the
+    path-traced calibration's width (a build's cost is its estimates, whatever the image size; one from 64 estimates
+    scaled ×16 overstated a 1024-estimate build 1.45×: its tracing and gathering do not scale). A build of 64
+    estimates first compiles the kernels at this film size."""
+    w = CALIBRATION_WIDTH_PX
+    h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
+    loaded = load_scene(seq.scene, seq.trajectory, w, h, CONVERGED_CALIBRATION_SPP[0])
+    settings = replace(seq.render_settings(seed=1), resolution=(w, h), duration_s=span_s,
+                       spp=CONVERGED_CALIBRATION_SPP[0], interpolation="linear")
+    name = resolve_scene(seq.scene).name
+    for k, samples in enumerate((min(settings.cache_samples, CALIBRATION_CACHE_SAMPLES), settings.cache_samples)):
+        plan = layout_render(seq.scene, seq.trajectory, replace(settings, cache_samples=samples), loaded=loaded)
+        fields = layout_convergence(plan)
+        out = tmp / f"cal-{name}-build-{k}"
+        make_out_dir(out)
+        cpu0 = clock()
+        converged_renderer(plan, loaded.ms, loaded.ts, out)
+        seconds = clock() - cpu0
+    return seconds, _probe_mrays(w, h, fields) * fields["cache_probes"] * fields["cache_samples"]
 
 
 def _probe_simulation(spec, seq, tmp: Path, costs: UnitCosts) -> None:

@@ -69,8 +69,8 @@ def test_the_estimate_of_a_converged_spec_matches_a_real_generate(tmp_path):
     extra, extra_real = est.cpu_s - est_traced.cpu_s, real - real_traced
     assert extra_real / TOLERANCE < extra < extra_real * TOLERANCE, (extra, extra_real, real, real_traced)
     # one build per render, sized by its probe rays (64 × 48: one per pixel), probe views and estimates, from the
-    # calibration's (256 × 192: one probe ray per 2 × 2 pixels, 64 estimates)
-    assert cost.cache_build_units == pytest.approx(128 * 96 * 4 * 64 / 1e6)
+    # calibration's (64 × 48, the sequence's 1024 estimates)
+    assert cost.cache_build_units == pytest.approx(64 * 48 * 4 * 1024 / 1e6)
     build = cost.cache_build_s * (64 * 48 * 4 * 1024 / 1e6) / cost.cache_build_units
     assert est.cache_build_s == pytest.approx(2 * build)
     # and each render's noise probe: three converged keyframes (keyframe 0 with the next seed, from each half cache)
