@@ -14,9 +14,19 @@ import numbers
 RESOLUTION_PX = (128, 96)
 #: Monte Carlo samples per pixel of a path-traced render (``convergence = "off"``).
 SPP = 16
-#: Camera rays per pixel of a converged render (``simspad render`` with no quality flag): fewer (16) leave the
-#: office and plant at 3.5-4.0 % median error at 48×36 px where 64 give 2.9-3.0 % (docs/rendering.md).
+#: Camera rays per pixel of a converged render (``simspad render`` with no quality flag): 64 below
+#: :data:`FEW_CAMERA_RAYS_FROM_PX` wide, :data:`FEW_CAMERA_RAYS` from there (:func:`camera_rays`). The rays average
+#: texture, cached light and glossy chains over a pixel's footprint, so their noise falls as pixels shrink: 16 rays
+#: leave the office and plant 3.5-4.0 % off a 4096-spp pair at 48×36 px (64: 2.9-3.0 %), but 1.8-2.7 % at 256 px
+#: and 2.1 % at 512 px (office, plant, piano; docs/rendering.md, fifth round).
 CAMERA_RAYS = 64
+FEW_CAMERA_RAYS = 16
+FEW_CAMERA_RAYS_FROM_PX = 256
+
+
+def camera_rays(width: int) -> int:
+    """Default camera rays per pixel of a converged render ``width`` pixels wide (:data:`CAMERA_RAYS`)."""
+    return FEW_CAMERA_RAYS if width >= FEW_CAMERA_RAYS_FROM_PX else CAMERA_RAYS
 #: Largest predicted image motion between two rendered keyframes, in pixels.
 MAX_FLOW_PX = 0.5
 #: Lowest keyframe rate in Hz, whatever the motion.

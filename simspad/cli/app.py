@@ -93,8 +93,8 @@ def cli(debug: bool, allow_python_scenes: bool) -> None:
               help="WxH pixels.")
 @click.option("--spp", type=int, default=None,
               help=f"Samples per pixel: path tracing (the reference) at N samples; with --convergence cache, camera "
-                   f"rays per pixel. [default: {defaults.CAMERA_RAYS} camera rays, converged; "
-                   f"{defaults.SPP} with --convergence off]")
+                   f"rays per pixel. [default: {defaults.CAMERA_RAYS} camera rays, converged ({defaults.FEW_CAMERA_RAYS} from "
+                   f"{defaults.FEW_CAMERA_RAYS_FROM_PX} px wide); {defaults.SPP} with --convergence off]")
 @click.option("--max-flow", "max_flow_px", type=float, default=defaults.MAX_FLOW_PX, show_default=True,
               help="Largest image motion between keyframes (pixels).")
 @click.option("--min-rate", "min_rate_hz", type=float, default=defaults.MIN_KEYFRAME_RATE_HZ, show_default=True,
@@ -131,7 +131,7 @@ def render(scene, trajectory, duration_s, start_s, resolution, spp, max_flow_px,
     if convergence == "auto":  # `--spp N` alone keeps meaning brute-force path tracing: the reference
         convergence = "off" if spp is not None else "cache"
     if spp is None:
-        spp = defaults.CAMERA_RAYS if convergence == "cache" else defaults.SPP
+        spp = defaults.camera_rays(resolution[0]) if convergence == "cache" else defaults.SPP
     summary = render_from_cli(scene, trajectory, duration_s=duration_s, start_s=start_s, resolution=resolution,
                               spp=spp, max_flow_px=max_flow_px, min_rate_hz=min_rate_hz, seed=seed,
                               interpolation=interpolation, gt_rate_hz=gt_rate_hz, convergence=convergence,

@@ -312,3 +312,9 @@ def test_simspad_render_converges_unless_spp_is_given(tmp_path):
     assert renderer["c"]["convergence"]["cache_width_px"] == 128
     assert renderer["p"]["spp"] == 4 and not renderer["p"].get("convergence")
     assert renderer["o"]["spp"] == 16 and not renderer["o"].get("convergence")
+
+
+def test_the_default_camera_rays_fall_from_256_px_wide():
+    from simspad.defaults import camera_rays
+
+    assert [camera_rays(w) for w in (16, 128, 255, 256, 512)] == [64, 64, 64, 16, 16]
