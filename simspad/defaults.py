@@ -27,6 +27,8 @@ FEW_CAMERA_RAYS_FROM_PX = 256
 def camera_rays(width: int) -> int:
     """Default camera rays per pixel of a converged render ``width`` pixels wide (:data:`CAMERA_RAYS`)."""
     return FEW_CAMERA_RAYS if width >= FEW_CAMERA_RAYS_FROM_PX else CAMERA_RAYS
+
+
 #: Largest predicted image motion between two rendered keyframes, in pixels.
 MAX_FLOW_PX = 0.5
 #: Lowest keyframe rate in Hz, whatever the motion.

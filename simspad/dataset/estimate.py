@@ -59,7 +59,7 @@ from simspad.io.exr import LUMINANCE_CHANNEL, OBJECT_ID_CHANNEL, read_exr, write
 from simspad.io.geometry import GEOMETRY_BYTES_PER_PX, read_geometry, write_geometry
 from simspad.io.render_dir import TIMELINE_FILE, write_timeline_json
 from simspad.physics.radiometry import Optics
-from simspad.render.converged import cache_block, converged_renderer, layout_convergence
+from simspad.render.converged import cache_block, converged_renderer, layout_convergence, probe_grid
 from simspad.render.keyframe_files import make_out_dir
 from simspad.render.mitsuba_env import CUDA_VARIANT, cuda_device_name, select_variant
 from simspad.render.render_layout import chunk_size_for
@@ -149,8 +149,8 @@ class _PeakRss:
 
 def _probe_mrays(width: int, height: int, fields: dict) -> float:
     """Millions of probe rays per view of a converged render (``fields``: its ``renderer.convergence``)."""
-    block = cache_block(width, fields.get("cache_width_px", width))
-    return -(-width // block) * -(-height // block) / 1e6
+    columns, rows = probe_grid(width, height, cache_block(width, fields.get("cache_width_px", width)))
+    return columns * rows / 1e6
 
 
 @dataclass
@@ -240,7 +240,7 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
     cpu0 = time.process_time()
     loaded = load_scene(seq.scene, seq.trajectory, w, h, spps[0])
     load_s = time.process_time() - cpu0  # every chunk of keyframes loads the scene once
-    points, exr, rss, build = [], [], [], (0.0, 0.0)
+    points, exr, rss, build, cache = [], [], [], (0.0, 0.0), None
     for spp in spps:
         loaded.ms.spp = spp  # mi.render takes the sample count per call; same scene, same film
         plan = layout_render(seq.scene, seq.trajectory, _settings(seq, (w, h), span_s, spp, converged),
@@ -250,7 +250,10 @@ def _calibrate_scene(seq, tmp: Path, gpu: str | None = None, converged: bool = F
         fields = layout_convergence(plan)
         if fields is not None:
             make_out_dir(out)
-            converged_renderer(plan, loaded.ms, loaded.ts, out)  # builds the cache and writes it into ``out``
+            if cache is not None:  # the same cache (probe rays do not depend on the camera rays): built once
+                shutil.copy2(cache, out / fields["cache_file"])
+            converged_renderer(plan, loaded.ms, loaded.ts, out)  # builds the cache (or reads it) into ``out``
+            cache = out / fields["cache_file"]
             (out / "t").mkdir(parents=True, exist_ok=True)
             shutil.copy2(out / fields["cache_file"], out / "t" / fields["cache_file"])  # the timed keyframes' too
         render_keyframes(seq.scene, seq.trajectory, plan, picks[:1], out_dir=out, loaded=loaded)  # kernels
@@ -282,10 +285,9 @@ def _time_cache_build(seq, tmp: Path, span_s: float, clock) -> tuple[float, floa
     w = CALIBRATION_WIDTH_PX
     h = max(1, round(w * seq.resolution[1] / seq.resolution[0]))
     loaded = load_scene(seq.scene, seq.trajectory, w, h, CONVERGED_CALIBRATION_SPP[0])
-    settings = replace(seq.render_settings(seed=1), resolution=(w, h), duration_s=span_s,
-                       spp=CONVERGED_CALIBRATION_SPP[0], interpolation="linear")
+    settings = _settings(seq, (w, h), span_s, CONVERGED_CALIBRATION_SPP[0], converged=True)
     name = resolve_scene(seq.scene).name
-    for k, samples in enumerate((min(settings.cache_samples, CALIBRATION_CACHE_SAMPLES), settings.cache_samples)):
+    for k, samples in enumerate((settings.cache_samples, seq.cache_samples)):
         plan = layout_render(seq.scene, seq.trajectory, replace(settings, cache_samples=samples), loaded=loaded)
         fields = layout_convergence(plan)
         out = tmp / f"cal-{name}-build-{k}"
@@ -515,8 +517,8 @@ def estimate_spec(spec, costs: UnitCosts) -> Estimate:
             n_warp += n
         # and its noise probe (the render-noise budget): keyframe 0 once more, path-traced; a converged render's is
         # keyframe 0 from the same cache with the next seed and from each half of the cache
-        this = build + per_kf * n + (3 * per_kf if fields is not None else traced.seconds_per_keyframe(w * h / 1e6,
-                                                                                                      seq.spp))
+        probe = 3 * per_kf if fields is not None else traced.seconds_per_keyframe(w * h / 1e6, seq.spp)
+        this = build + per_kf * n + probe
         if fields is not None:
             n_converged += 1
             build_cpu += build
@@ -599,8 +601,7 @@ def format_estimate(est: Estimate, costs: UnitCosts, *, workers: int, cluster_wo
                 f"ones (the same poses: linked, not rendered)"] if est.n_shared_keyframes else []),
              *([f"               {est.n_converged_renders} converged render(s) (irradiance cache): cache builds "
                 f"{hours(est.cache_build_s)} (one per render, × its probe rays × cache_probes × cache_samples), "
-                f"their "
-                f"keyframes {hours(est.converged_keyframe_s)} after the build"] if est.n_converged_renders else []),
+                f"their keyframes {hours(est.converged_keyframe_s)} after the build"] if est.n_converged_renders else []),
              f"  simulations  {est.n_recordings} recording(s), {est.sim_cpu_s / 3600:.2f} CPU-h (longest "
              f"{hours(est.longest_sim_s)})",
              (f"  total        {est.render_cpu_s / 3600:.2f} GPU-h + {est.sim_cpu_s / 3600:.2f} CPU-h"

@@ -252,9 +252,10 @@ class ConvergedRenderer:
         return table
 
     # ------------------------------------------------------------------------------------------ camera rays
-    def camera_samples(self, seed: int) -> np.ndarray:
-        """Film positions [H·W·spp, 2] in [0, 1]²: stratified jitter, the same for every keyframe of a seed."""
-        w, h, k = self.ms.width, self.ms.height, self.spp
+    def camera_samples(self, seed: int, spp: int | None = None) -> np.ndarray:
+        """Film positions [H·W·spp, 2] in [0, 1]²: stratified jitter, the same for every keyframe of a seed
+        (``spp``: the renderer's camera rays unless given)."""
+        w, h, k = self.ms.width, self.ms.height, self.spp if spp is None else spp
         rng = np.random.default_rng([seed, 0x5C0FFEE])
         s = int(math.isqrt(k))
         if s * s == k:
@@ -556,14 +557,9 @@ class ConvergedRenderer:
         """Film positions [N, 2] of a probe view: one ray per ``block`` × ``block`` pixels, jittered within it (block
         1: :meth:`camera_samples` at one ray per pixel, the positions of renders before blocks existed)."""
         if block == 1:
-            spp = self.spp
-            self.spp = 1
-            try:
-                return self.camera_samples(seed)
-            finally:
-                self.spp = spp
+            return self.camera_samples(seed, spp=1)
         w, h = self.ms.width, self.ms.height
-        bw, bh = -(-w // block), -(-h // block)
+        bw, bh = probe_grid(w, h, block)
         u = np.random.default_rng([seed, 0xB10C]).random((bh, bw, 2))
         xs = np.minimum((np.arange(bw)[None, :] + u[..., 0]) * block, w * (1 - 1e-7)) / w
         ys = np.minimum((np.arange(bh)[:, None] + u[..., 1]) * block, h * (1 - 1e-7)) / h
@@ -659,6 +655,12 @@ def cache_block(width: int, cache_width_px: int) -> int:
     """Pixels per probe ray along each axis for an image ``width`` px wide: the probe views are traced on a grid
     about ``cache_width_px`` wide (1 at or below it)."""
     return max(1, int(round(width / cache_width_px)))
+
+
+def probe_grid(width: int, height: int, block: int) -> tuple[int, int]:
+    """(columns, rows) of probe rays of a view ``width`` × ``height`` px traced one ray per ``block`` × ``block``
+    pixels (:func:`cache_block`)."""
+    return -(-width // block), -(-height // block)
 
 
 def build_cache(cr: ConvergedRenderer, poses: list, seed: int, q_samples: int, cell_px: float,
